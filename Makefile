@@ -1,0 +1,30 @@
+# The two commands (see README):  make demo   and   make test
+# Both create .venv/ at the repo root from the pinned constraints when it is missing.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+
+.PHONY: demo test lint bench clean-venv
+
+$(STAMP): pyproject.toml constraints.txt
+	$(PYTHON) -m venv $(VENV)
+	PIP_CONSTRAINT=$(CURDIR)/constraints.txt $(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[dev]'
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/idtool seed-study --out fits/seed-study --force
+
+lint: $(STAMP)
+	$(BIN)/ruff check idtool tests benchmarks
+	$(BIN)/ruff format --check idtool tests benchmarks
+	$(BIN)/mypy
+
+test: lint
+	MPLBACKEND=Agg $(BIN)/python -m pytest
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/bench_curve.py
+
+clean-venv:
+	rm -rf $(VENV)

@@ -1,0 +1,43 @@
+"""All-or-nothing output folders: written to a temporary sibling, renamed into place."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+from ._errors import IdtoolError
+
+__all__ = ["atomic_output_dir"]
+
+
+@contextlib.contextmanager
+def atomic_output_dir(out: str | os.PathLike[str], *, force: bool = False) -> Iterator[Path]:
+    """Yield a fresh temporary folder that replaces ``out`` only if the block succeeds.
+
+    The folder is created next to ``out`` (same file system, so the final rename is
+    atomic). On any exception, including KeyboardInterrupt, it is removed and ``out`` is
+    left as it was. An existing ``out`` is replaced only with ``force=True``.
+    """
+    out = Path(out)
+    if out.exists() and not force:
+        raise IdtoolError(f"{out} already exists; pass --force to replace it")
+    if out.exists() and not out.is_dir():
+        raise IdtoolError(f"{out} exists and is not a folder; choose another --out")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))
+    try:
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    if out.exists():
+        old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
+        os.replace(out, old / out.name)
+        os.replace(tmp, out)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.replace(tmp, out)

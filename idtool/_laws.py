@@ -1,0 +1,167 @@
+"""Friction laws: Coulomb, Dahl and LuGre (model notes §1, paper eqs. 1-5).
+
+Every law is written on the *bristle force* ``fb = Kt z`` [N] (Kt the tangential
+contact stiffness [N/m], z the mean bristle deflection [m]). Along a stretch of slip
+``du`` [m] of constant sign ``s`` and at slip velocity ``V`` [m/s], the bristle
+equation ``dz/dt = V - |V| z / g(V)`` becomes, with ``L(V) = Kt g(V)``,
+
+    d fb / du = Kt (1 - s fb / L(V)),
+
+which is linear in ``fb``. For a level ``L`` held constant over the stretch it has the
+exact solution (model notes §4)
+
+    fb <- s L + (fb - s L) exp(-Kt |du| / L),
+
+an affine map ``fb -> A fb + B`` that is exact for Dahl (``L = Fc``) whatever the size
+of ``du``; the rigid Coulomb limit is ``A = 0``. The contact solvers compose these
+maps, so no law needs a small time step near the sign switch of V.
+
+The friction force is ``F = fb + s1 dz/dt + s2 V`` with ``dz/dt = V (1 - s fb / L)``
+(paper eq. 3).
+"""
+
+from __future__ import annotations
+
+import abc
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+__all__ = ["AbstractFrictionLaw", "Coulomb", "Dahl", "LuGre"]
+
+
+class AbstractFrictionLaw(eqx.Module):
+    """A rate-independent-in-form friction law on the bristle force ``fb`` [N]."""
+
+    fc_n: eqx.AbstractVar[Float[ArrayLike, ""]]
+
+    def level_n(self, v_m_s: Float[ArrayLike, "*b"]) -> Float[Array, "*b"]:
+        """Steady bristle force ``L(V) = Kt g(V)`` [N] at slip velocity V [m/s] (eq. 2).
+
+        Constant ``Fc`` for Coulomb and Dahl; LuGre adds the Stribeck curve.
+        """
+        return jnp.broadcast_to(jnp.asarray(self.fc_n, float), jnp.shape(v_m_s))
+
+    @abc.abstractmethod
+    def stiffness_n_m(self) -> Float[Array, ""]:
+        """Tangential contact stiffness Kt [N/m] (infinite for Coulomb)."""
+
+    def decay_exponent(
+        self, du_abs_m: Float[ArrayLike, "*b"], level_n: Float[ArrayLike, "*b"]
+    ) -> Float[Array, "*b"]:
+        """Exponent ``kappa = Kt |du| / L``: ``fb - s L`` shrinks by ``exp(-kappa)`` over |du|."""
+        return self.stiffness_n_m() * jnp.asarray(du_abs_m) / jnp.asarray(level_n)
+
+    def bristle_damping_n_s_m(self) -> Float[Array, ""]:
+        """Bristle damping s1 [N s/m]; zero unless the law is LuGre."""
+        return jnp.zeros(())
+
+    def viscous_n_s_m(self) -> Float[Array, ""]:
+        """Viscous coefficient s2 [N s/m]; zero unless the law is LuGre."""
+        return jnp.zeros(())
+
+    def slip_map(
+        self, du_m: Float[ArrayLike, "*b"], v_m_s: Float[ArrayLike, "*b"]
+    ) -> tuple[Float[Array, "*b"], Float[Array, "*b"]]:
+        """Affine map ``fb -> A fb + B`` over a slip increment ``du`` [m] of one sign.
+
+        ``v_m_s`` is the slip velocity at which the level ``L(V)`` is evaluated (its
+        midpoint value over the increment); exact for Dahl and Coulomb.
+        """
+        du_m = jnp.asarray(du_m)
+        level = self.level_n(v_m_s)
+        a = jnp.exp(-self.decay_exponent(jnp.abs(du_m), level))
+        return a, (1.0 - a) * jnp.sign(du_m) * level
+
+    def off_force_n(self, v_m_s: Float[ArrayLike, "*b"]) -> Float[Array, "*b"]:
+        """Friction force [N] in steady sliding at constant speed ``v_m_s`` > 0."""
+        v = jnp.asarray(v_m_s)
+        return self.level_n(v) + self.viscous_n_s_m() * v
+
+    def force_rate(
+        self, fb_n: Float[ArrayLike, "*b"], v_m_s: Float[ArrayLike, "*b"]
+    ) -> Float[Array, "*b"]:
+        """Time derivative of the bristle force, ``Kt V (1 - sgn(V) fb / L(V))`` [N/s].
+
+        For Dahl this is the paper's eq. 5/7. Used by brute-force time stepping.
+        """
+        v = jnp.asarray(v_m_s)
+        return self.stiffness_n_m() * v * (1.0 - jnp.sign(v) * fb_n / self.level_n(v))
+
+    def force_n(
+        self, fb_n: Float[ArrayLike, "*b"], v_m_s: Float[ArrayLike, "*b"]
+    ) -> Float[Array, "*b"]:
+        """Friction force ``F = fb + s1 dz/dt + s2 V`` [N] (paper eq. 3)."""
+        v = jnp.asarray(v_m_s)
+        zdot = v * (1.0 - jnp.sign(v) * fb_n / self.level_n(v))
+        return fb_n + self.bristle_damping_n_s_m() * zdot + self.viscous_n_s_m() * v
+
+
+class Coulomb(AbstractFrictionLaw):
+    """Coulomb friction ``F = Fc sgn(V)``: the rigid limit Kt -> infinity (notes §1)."""
+
+    fc_n: Float[ArrayLike, ""]
+
+    def stiffness_n_m(self):
+        return jnp.asarray(jnp.inf)
+
+    def decay_exponent(self, du_abs_m, level_n):
+        # inf * 0 is nan; the rigid law forgets its state over any slip, even none.
+        return jnp.full(jnp.broadcast_shapes(jnp.shape(du_abs_m), jnp.shape(level_n)), jnp.inf)
+
+    def force_rate(self, fb_n, v_m_s):
+        raise TypeError("Coulomb friction has no bristle dynamics (Kt is infinite)")
+
+
+class Dahl(AbstractFrictionLaw):
+    """Dahl friction ``dF/dt = Kt V (1 - sgn(V) F / Fc)`` (paper eq. 5, notes §1).
+
+    Attributes:
+        fc_n: Coulomb level Fc [N] (``mu * normal load``).
+        kt_n_m: tangential contact (bristle) stiffness Kt [N/m].
+    """
+
+    fc_n: Float[ArrayLike, ""]
+    kt_n_m: Float[ArrayLike, ""]
+
+    def stiffness_n_m(self):
+        return jnp.asarray(self.kt_n_m, float)
+
+
+class LuGre(AbstractFrictionLaw):
+    """LuGre friction in full (paper eqs. 1-3, notes §1).
+
+    ``dz/dt = V - |V| z / g(V)``, ``g(V) = (Fc + (Fs - Fc) exp(-(V/Vs)^2)) / Kt``,
+    ``F = Kt z + s1 dz/dt + s2 V``. With ``s1 = s2 = 0`` and ``Fs = Fc`` it is Dahl.
+
+    Fields come in the order of the abstract base (``fc_n`` first); pass them by name.
+
+    Attributes:
+        fc_n: Coulomb (kinetic) level Fc [N].
+        kt_n_m: bristle stiffness Kt (sigma0) [N/m].
+        fs_n: static level Fs [N].
+        vs_m_s: Stribeck velocity Vs [m/s].
+        s1_n_s_m: bristle damping sigma1 [N s/m].
+        s2_n_s_m: viscous coefficient sigma2 [N s/m].
+    """
+
+    fc_n: Float[ArrayLike, ""]
+    kt_n_m: Float[ArrayLike, ""]
+    fs_n: Float[ArrayLike, ""]
+    vs_m_s: Float[ArrayLike, ""]
+    s1_n_s_m: Float[ArrayLike, ""] = 0.0
+    s2_n_s_m: Float[ArrayLike, ""] = 0.0
+
+    def level_n(self, v_m_s):
+        v = jnp.asarray(v_m_s)
+        return self.fc_n + (self.fs_n - self.fc_n) * jnp.exp(-((v / self.vs_m_s) ** 2))
+
+    def stiffness_n_m(self):
+        return jnp.asarray(self.kt_n_m, float)
+
+    def bristle_damping_n_s_m(self):
+        return jnp.asarray(self.s1_n_s_m, float)
+
+    def viscous_n_s_m(self):
+        return jnp.asarray(self.s2_n_s_m, float)
