@@ -8,18 +8,56 @@ import jax as _jax
 
 _jax.config.update("jax_enable_x64", True)
 
-from ._contact import CycleAverage, prescribed_cycle_average, reversal_phase  # noqa: E402
+from ._contact import (  # noqa: E402
+    CycleAverage,
+    cycle_average_curve,
+    prescribed_cycle_average,
+    reversal_phase,
+)
+from ._dataset import Dataset, Rig, Trace, load_dataset  # noqa: E402
+from ._dataset_write import write_dataset  # noqa: E402
+from ._example import example_dataset_path, example_params_path  # noqa: E402
 from ._laws import AbstractFrictionLaw, Coulomb, Dahl, LuGre  # noqa: E402
+from ._sim_params import BenchParams, load_bench_params  # noqa: E402
+from ._simulate import BenchTruth, TraceTruth, simulate_bench, write_simulation  # noqa: E402
+from ._transducer import (  # noqa: E402
+    EnergyBalance,
+    Transducer,
+    TransducerSteadyState,
+    simulate_transducer,
+    table2,
+    transducer_steady_state,
+)
 
 __version__ = "0.1.0"
 
 __all__ = [
     "AbstractFrictionLaw",
+    "BenchParams",
+    "BenchTruth",
     "Coulomb",
     "CycleAverage",
     "Dahl",
+    "Dataset",
+    "EnergyBalance",
     "LuGre",
+    "Rig",
+    "Trace",
+    "TraceTruth",
+    "Transducer",
+    "TransducerSteadyState",
     "__version__",
+    "cycle_average_curve",
+    "example_dataset_path",
+    "example_params_path",
+    "load_bench_params",
+    "load_dataset",
     "prescribed_cycle_average",
     "reversal_phase",
+    "simulate_bench",
+    "simulate_transducer",
+    "table2",
+    "transducer_steady_state",
+    "write_dataset",
+    "write_simulation",
 ]

@@ -103,13 +103,14 @@ def mean_force_n(
     since_start = smooth_max(t - timing.startup_s, 0.0, corner_n / startup_slope_n_s)
     rise = smooth_min(startup_slope_n_s * since_start, f_off, corner_n)
 
-    on_len = jnp.where(
-        jnp.isfinite(timing.on_end_s), jnp.asarray(timing.on_end_s) - timing.on_start_s, 0.0
-    )
-    t_on = jnp.where(jnp.isfinite(timing.on_start_s), timing.on_start_s, t[-1] + 1.0)
+    # Elementwise in t and every parameter (they broadcast), so a whole dataset can be
+    # evaluated in one call; an infinite ON start means no ON window at all.
+    has_on = jnp.isfinite(timing.on_start_s) & jnp.isfinite(timing.on_end_s)
+    t_on = jnp.where(has_on, timing.on_start_s, 0.0)
+    on_len = jnp.where(has_on, jnp.asarray(timing.on_end_s) - t_on, 0.0)
     during = smooth_max(slope_n_s * (t - t_on), 0.0, corner_n)
     drop_on = smooth_min(during, depth, corner_n)
     drop_end = smooth_min(slope_n_s * on_len, depth, corner_n)
     drop_after = smooth_max(drop_end - slope_n_s * (t - t_on - on_len), 0.0, corner_n)
-    drop = jnp.where(t < t_on + on_len, drop_on, drop_after)
-    return offset_n + rise - drop
+    drop = jnp.where(has_on, jnp.where(t < t_on + on_len, drop_on, drop_after), 0.0)
+    return jnp.asarray(offset_n) + rise - drop

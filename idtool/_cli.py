@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from . import __version__
 from ._errors import IdtoolError
 
-_COMMANDS = ("_cmd_curve",)
+_COMMANDS = ("_cmd_curve", "_cmd_seed_study", "_cmd_validate", "_cmd_simulate_bench")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -33,10 +33,30 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _enable_compilation_cache() -> None:
+    """Keep compiled XLA programs on disk so a repeated command skips compilation.
+
+    Compilation is most of the time to a first result of a short command. The cache
+    lives in ``$IDTOOL_CACHE_DIR`` (default ``~/.cache/idtool/jax``); set it to an empty
+    string to disable it.
+    """
+    import os
+
+    import jax
+
+    path = os.environ.get("IDTOOL_CACHE_DIR", os.path.expanduser("~/.cache/idtool/jax"))
+    if path:
+        jax.config.update("jax_compilation_cache_dir", path)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.05)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``idtool`` console script; returns the exit status."""
+    _enable_compilation_cache()
     parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)
+    args.argv = argv  # recorded in every output's provenance
     try:
         return int(args.func(args) or 0)
     except IdtoolError as err:
@@ -45,6 +65,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"idtool {args.command}: interrupted; nothing was written", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # The reader went away (``idtool ... | head``): not an error of ours. Point
+        # stdout at devnull so the interpreter's final flush does not complain.
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":

@@ -9,11 +9,10 @@ from __future__ import annotations
 import argparse
 import json
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._contact import prescribed_cycle_average
+from ._contact import cycle_average_curve
 from ._errors import IdtoolError
 from ._laws import AbstractFrictionLaw, Coulomb, Dahl, LuGre
 
@@ -64,7 +63,7 @@ def dimensionless_law(
 
 def friction_curve(law: AbstractFrictionLaw, vr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Friction ratio and power ratio of the dimensionless contact at each VR."""
-    out = jax.vmap(lambda v: prescribed_cycle_average(law, v, 1.0, 1.0))(jnp.asarray(vr))
+    out = cycle_average_curve(law, jnp.asarray(vr))
     return np.asarray(out.friction_ratio), np.asarray(out.power_ratio)
 
 

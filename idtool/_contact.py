@@ -21,6 +21,8 @@ stays accurate however stiff the contact (large Lambda) is.
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -28,7 +30,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ._laws import AbstractFrictionLaw
 
-__all__ = ["CycleAverage", "prescribed_cycle_average", "reversal_phase"]
+__all__ = ["CycleAverage", "cycle_average_curve", "prescribed_cycle_average", "reversal_phase"]
 
 _TWO_PI = 2.0 * jnp.pi
 
@@ -68,11 +70,12 @@ def _phi1(kappa: Array) -> Array:
     return jnp.where(small, 1.0 - kappa / 2.0 + kappa**2 / 6.0, -jnp.expm1(-k) / k)
 
 
-def _compose(first: tuple[Array, Array], second: tuple[Array, Array]) -> tuple[Array, Array]:
-    """Affine maps ``fb -> A fb + B``: apply ``first`` then ``second``."""
-    a1, b1 = first
-    a2, b2 = second
-    return a2 * a1, a2 * b1 + b2
+def _compose_step(prefix, step):
+    """Affine maps ``fb -> A fb + B``: extend the composed ``prefix`` by one ``step``."""
+    a1, b1 = prefix
+    a2, b2 = step
+    out = (a2 * a1, a2 * b1 + b2)
+    return out, out
 
 
 def reversal_phase(velocity_ratio: Float[ArrayLike, ""]) -> Float[Array, ""]:
@@ -86,7 +89,9 @@ def reversal_phase(velocity_ratio: Float[ArrayLike, ""]) -> Float[Array, ""]:
     return jnp.where(below, jnp.arccos(-vr_in), jnp.pi)
 
 
-@eqx.filter_jit
+# jax.jit, not eqx.filter_jit: Python floats in the law are traced, not baked in,
+# so a new parameter value does not recompile.
+@functools.partial(jax.jit, static_argnames=("n_phase",))
 def prescribed_cycle_average(
     law: AbstractFrictionLaw,
     sliding_speed_m_s: Float[ArrayLike, ""],
@@ -137,7 +142,9 @@ def prescribed_cycle_average(
     offset = (1.0 - decay) * target
 
     # Periodic steady state: the fixed point of the composed one-cycle map.
-    prefix_a, prefix_b = jax.lax.associative_scan(_compose, (decay, offset))
+    # A sequential scan, not jax.lax.associative_scan: same result, but it compiles
+    # several times faster, and compile time is most of the time to a first result.
+    _, (prefix_a, prefix_b) = jax.lax.scan(_compose_step, (1.0, 0.0), (decay, offset))
     one_minus_a = -jnp.expm1(-jnp.sum(kappa))
     fb0 = prefix_b[-1] / jnp.where(one_minus_a > 0.0, one_minus_a, 1.0)
     fb_start = jnp.concatenate([fb0[None], prefix_a[:-1] * fb0 + prefix_b[:-1]])
@@ -167,3 +174,29 @@ def prescribed_cycle_average(
         mean_power_w=mean_power,
         off_power_w=off_power,
     )
+
+
+# The curve is cheap to run (about a millisecond for 41 points) but costs a few tenths
+# of a second to compile, so the time to a first result is all compilation: XLA's
+# backend optimisation level 0 roughly halves it (benchmarks/bench_curve.py).
+@functools.partial(
+    jax.jit,
+    static_argnames=("n_phase",),
+    compiler_options={"xla_backend_optimization_level": 0},
+)
+def cycle_average_curve(
+    law: AbstractFrictionLaw,
+    velocity_ratios: Float[ArrayLike, " n"],
+    amplitude_m: Float[ArrayLike, ""] = 1.0,
+    angular_frequency_rad_s: Float[ArrayLike, ""] = 1.0,
+    n_phase: int = 256,
+) -> CycleAverage:
+    """:func:`prescribed_cycle_average` at many velocity ratios (``v = VR a w``).
+
+    With the defaults ``a = w = 1`` and a law with ``Fc = 1``, ``Kt`` is Lambda.
+    """
+    vr = jnp.asarray(velocity_ratios, float)
+    speeds = vr * amplitude_m * angular_frequency_rad_s
+    return jax.vmap(
+        lambda v: prescribed_cycle_average(law, v, amplitude_m, angular_frequency_rad_s, n_phase)
+    )(speeds)

@@ -95,7 +95,7 @@ class AbstractFrictionLaw(eqx.Module):
         """Friction force ``F = fb + s1 dz/dt + s2 V`` [N] (paper eq. 3)."""
         v = jnp.asarray(v_m_s)
         zdot = v * (1.0 - jnp.sign(v) * fb_n / self.level_n(v))
-        return fb_n + self.bristle_damping_n_s_m() * zdot + self.viscous_n_s_m() * v
+        return jnp.asarray(fb_n) + self.bristle_damping_n_s_m() * zdot + self.viscous_n_s_m() * v
 
 
 class Coulomb(AbstractFrictionLaw):
@@ -155,7 +155,8 @@ class LuGre(AbstractFrictionLaw):
 
     def level_n(self, v_m_s):
         v = jnp.asarray(v_m_s)
-        return self.fc_n + (self.fs_n - self.fc_n) * jnp.exp(-((v / self.vs_m_s) ** 2))
+        fc, fs = jnp.asarray(self.fc_n), jnp.asarray(self.fs_n)
+        return fc + (fs - fc) * jnp.exp(-((v / self.vs_m_s) ** 2))
 
     def stiffness_n_m(self):
         return jnp.asarray(self.kt_n_m, float)

@@ -1,0 +1,113 @@
+"""``idtool curve`` and ``idtool seed-study`` through the command line."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from idtool._cli import main
+from idtool._limits import coulomb_friction_ratio
+
+
+def test_curve_json_has_the_documented_keys(capsys):
+    assert main(["curve", "--law", "coulomb", "--vr", "0.1,0.5,0.9", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert [set(r) for r in rows] == [{"vr", "friction_ratio", "power_ratio"}] * 3
+    got = [r["friction_ratio"] for r in rows]
+    np.testing.assert_allclose(got, coulomb_friction_ratio(np.array([0.1, 0.5, 0.9])), atol=1e-9)
+
+
+def test_curve_table_for_each_law(capsys):
+    for law in ("coulomb", "dahl", "lugre"):
+        assert main(["curve", "--law", law, "--vr", "0.05:0.95:3", "--lambda", "5"]) == 0
+        out = capsys.readouterr().out
+        assert "friction_ratio" in out and "power_ratio" in out
+        assert len(out.strip().splitlines()) == 2 + 3
+
+
+def test_curve_dahl_spot_value(capsys):
+    main(["curve", "--law", "dahl", "--vr", "0.5", "--lambda", "5", "--json"])
+    assert json.loads(capsys.readouterr().out)[0]["friction_ratio"] == pytest.approx(
+        0.379, abs=2e-3
+    )
+
+
+@pytest.mark.parametrize(
+    "args",
+    [["--vr", "abc"], ["--vr", "-0.5"], ["--vr", "0.5", "--lambda", "0"], ["--vr", ""]],
+)
+def test_curve_bad_input_exits_2_with_a_message(args, capsys):
+    assert main(["curve", *args]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("idtool curve: ") and "Traceback" not in err
+
+
+def test_console_script_bad_input_has_no_traceback():
+    proc = subprocess.run(
+        [sys.executable, "-m", "idtool._cli", "curve", "--vr", "x"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr and "--vr" in proc.stderr
+
+
+@pytest.fixture(scope="module")
+def seed_study_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("runs") / "seed"
+    assert main(["seed-study", "--out", str(out)]) == 0
+    return out
+
+
+def test_seed_study_writes_figures_and_tidy_csv(seed_study_dir):
+    names = sorted(p.name for p in seed_study_dir.iterdir())
+    assert [n for n in names if n.endswith(".png")] == [
+        "fig10_mass_kg.png",
+        "fig11_stiffness_n_m.png",
+        "fig8_force_amplitude_n.png",
+        "fig9_friction_coefficient.png",
+    ]
+    for n in names:
+        if n.endswith(".png"):
+            assert (seed_study_dir / n).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    table = pd.read_csv(seed_study_dir / "seed_study.csv")
+    assert list(table.columns) == [
+        "figure",
+        "parameter",
+        "value",
+        "velocity_ratio",
+        "friction_ratio",
+        "power_ratio",
+    ]
+    assert set(table.figure) == {"fig8", "fig9", "fig10", "fig11"}
+    assert np.all(np.isfinite(table[["velocity_ratio", "friction_ratio", "power_ratio"]]))
+    prov = json.loads((seed_study_dir / "provenance.json").read_text())
+    assert prov["versions"]["jax"] and "seed-study" in prov["command"]
+
+
+def test_seed_study_shows_the_paper_trends(seed_study_dir):
+    table = pd.read_csv(seed_study_dir / "seed_study.csv")
+
+    def at_vr(fig, column, vr=0.5):
+        rows = table[table.figure == fig]
+        return [
+            np.interp(vr, g.velocity_ratio, g[column]) for _, g in rows.groupby("value", sort=True)
+        ]
+
+    assert np.all(np.diff(at_vr("fig8", "friction_ratio")) < 0)  # FR falls with Fe
+    assert np.all(np.diff(at_vr("fig8", "power_ratio", 0.2)) > 0)  # PDR rises with Fe
+    assert np.all(np.diff(at_vr("fig9", "friction_ratio")) > 0)  # FR rises with mu
+    assert np.all(np.diff(at_vr("fig10", "friction_ratio")) > 0)  # FR rises with m
+    assert np.all(np.diff(at_vr("fig11", "friction_ratio")) < 0)  # FR falls towards resonance
+    assert np.allclose(table[table.velocity_ratio > 1.0].friction_ratio, 1.0, atol=1e-9)
+
+
+def test_seed_study_refuses_to_overwrite_without_force(seed_study_dir, capsys):
+    before = (seed_study_dir / "seed_study.csv").read_bytes()
+    assert main(["seed-study", "--out", str(seed_study_dir)]) == 2
+    assert "--force" in capsys.readouterr().err
+    assert (seed_study_dir / "seed_study.csv").read_bytes() == before

@@ -1,0 +1,93 @@
+"""``idtool validate``: summary of a good dataset, located problems and exit 2 for a bad one."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from bench_data_helpers import (
+    CORRUPTIONS,
+    TRACE_IDS,
+    Corruption,
+    expected_location,
+    make_dataset,
+    set_cell,
+)
+
+import idtool
+from idtool._cli import main
+
+
+def _console_script() -> str:
+    script = Path(sys.executable).with_name("idtool")
+    if not script.exists():
+        pytest.skip("the idtool console script is not installed next to this Python")
+    return str(script)
+
+
+def test_validate_example(capsys):
+    assert main(["validate", str(idtool.example_dataset_path())]) == 0
+    out = capsys.readouterr().out
+    assert "example-seat-belt-bench" in out and "24 trace(s)" in out
+    assert "N670_A50_T2.5" in out and "4.170-6.670" in out
+    assert "valid: no errors" in out
+
+
+def test_validate_json_summary(capsys, tmp_path):
+    root = make_dataset(tmp_path / "d")
+    assert main(["validate", str(root), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert [t["id"] for t in summary["traces"]] == list(TRACE_IDS)
+    assert summary["traces"][0]["on_windows_s"] == [[0.2, 0.3]]
+    assert summary["sha256"] == idtool.load_dataset(root).sha256
+
+
+def test_validate_prints_warnings(capsys, tmp_path):
+    root = make_dataset(tmp_path / "d")
+    set_cell(root / "traces/b.csv", 30, "time_s", "0.295")
+    assert main(["validate", str(root)]) == 0
+    out = capsys.readouterr().out
+    assert "1 warning(s)" in out and "irregular sampling" in out and "row 31" in out
+
+
+@pytest.mark.parametrize("case", CORRUPTIONS, ids=lambda c: c.name)
+def test_validate_malformed_exits_2_with_located_problem(capsys, tmp_path, case: Corruption):
+    root = make_dataset(tmp_path / "d")
+    case.apply(root)
+    assert main(["validate", str(root)]) == 2
+    captured = capsys.readouterr()
+    assert "Traceback" not in captured.err + captured.out
+    lines = captured.err.splitlines()
+    assert lines[0].startswith("idtool validate: ")
+    located = [line for line in lines if all(p in line for p in expected_location(root, case))]
+    assert located, captured.err
+
+
+def test_validate_missing_folder(capsys, tmp_path):
+    assert main(["validate", str(tmp_path / "nothing")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+
+
+def test_console_script_reports_bad_data_without_traceback(tmp_path):
+    """The real installed ``idtool`` command, in a fresh process."""
+    script = _console_script()
+    root = make_dataset(tmp_path / "d")
+    set_cell(root / "traces/a.csv", 7, "force_n", "12;5")
+    (root / "traces/b.parquet").write_bytes(b"not parquet at all")
+    document = json.loads((root / "dataset.json").read_text())
+    document["traces"][1]["file"] = "traces/b.parquet"
+    (root / "dataset.json").write_text(json.dumps(document))
+    done = subprocess.run([script, "validate", str(root)], capture_output=True, text=True)
+    assert done.returncode == 2
+    assert "Traceback" not in done.stderr + done.stdout
+    assert f"{root / 'traces/a.csv'}, row 7, column 'force_n'" in done.stderr
+    assert f"{root / 'traces/b.parquet'}" in done.stderr and "Parquet" in done.stderr
+
+    good = subprocess.run(
+        [script, "validate", str(make_dataset(tmp_path / "ok"))], capture_output=True, text=True
+    )
+    assert good.returncode == 0, good.stderr
+    assert "valid: no errors" in good.stdout
