@@ -14,7 +14,13 @@ from collections.abc import Sequence
 from . import __version__
 from ._errors import IdtoolError
 
-_COMMANDS = ("_cmd_curve", "_cmd_seed_study", "_cmd_validate", "_cmd_simulate_bench")
+_COMMANDS = (
+    "_cmd_curve",
+    "_cmd_seed_study",
+    "_cmd_validate",
+    "_cmd_simulate_bench",
+    "_cmd_fit",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
