@@ -17,6 +17,7 @@ def _run(args: argparse.Namespace) -> int:
     from ._dataset import load_dataset
     from ._fitreport import fit_json, fit_report, plot_fit
     from ._fitrun import fit_dataset
+    from ._fitstore import save_fit_state
 
     started = time.perf_counter()
     out = Path(args.out)
@@ -25,6 +26,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.starts < 1:
         raise IdtoolError(f"--starts {args.starts}: give at least 1")
     dataset = load_dataset(args.dataset)
+    dataset_path = str(Path(args.dataset).resolve())
     for w in dataset.warnings:
         print(f"idtool fit: {w}")
     run = fit_dataset(
@@ -39,10 +41,11 @@ def _run(args: argparse.Namespace) -> int:
     )
     report = fit_report(run)
     with atomic_output_dir(out, force=args.force) as tmp:
-        doc = fit_json(run, str(Path(args.dataset)), args.argv)
+        doc = fit_json(run, dataset_path, args.argv)
         doc["seconds"] = round(time.perf_counter() - started, 2)
         (tmp / "fit.json").write_text(json.dumps(doc, indent=1) + "\n")
         (tmp / "report.txt").write_text(report + "\n")
+        save_fit_state(tmp, run.chosen)
         plot_fit(run, tmp)
     print(report)
     print(

@@ -75,6 +75,8 @@ class FitResult:
     warnings: list[str]
     lm_steps: int
     residual_evaluations: int
+    # The compiled solvers of this model, kept for profiling without recompiling.
+    solvers: tuple = dataclasses.field(default=(), repr=False, compare=False)
 
     @property
     def n_data(self) -> int:
@@ -207,7 +209,8 @@ def fit_model(
         if abs(new_phi - phi) < 0.02 or round_ == 2:
             break
         phi = new_phi
-    return _summarise(model, np.asarray(zj), phi, optima, steps, converged)
+    result = _summarise(model, np.asarray(zj), phi, optima, steps, converged)
+    return dataclasses.replace(result, solvers=(run_physical, run_masked, residuals))
 
 
 def _summarise(

@@ -187,3 +187,34 @@ def test_same_seed_same_fit():
     np.testing.assert_array_equal(a.chosen.z, b.chosen.z)
     model = FitModel(a.data, start_values(a.data))
     assert model.names == a.chosen.model.names
+
+
+def small_dataset(seed: int, **experiments):
+    params = example_params()
+    params["experiments"]["normal_loads_n"] = [270.0, 670.0]
+    params["experiments"]["on_durations_s"] = [2.0]
+    params["experiments"].update(experiments)
+    return idtool.simulate_bench(params, seed=seed)
+
+
+def test_profile_likelihood_agrees_with_the_gauss_newton_interval():
+    dataset, _ = small_dataset(21)
+    run = fit_dataset(dataset, seed=0, profile=True)
+    for name in PHYSICAL:
+        prof = run.profiles[name]
+        est = run.chosen.estimates[name]
+        assert prof.ci95[0] < est.estimate < prof.ci95[1]
+        assert prof.delta.min() == pytest.approx(0.0, abs=0.05)  # refits reach the optimum
+        # Near-linear problem: the profile and Wald widths agree to within a factor 1.5.
+        ratio = (prof.ci95[1] - prof.ci95[0]) / (est.ci95[1] - est.ci95[0])
+        assert 1 / 1.5 < ratio < 1.5, (name, ratio)
+
+
+def test_lugre_fit_runs_and_ranks_against_dahl():
+    dataset, _ = small_dataset(22)
+    run = fit_dataset(dataset, seed=0, compare_laws=True)
+    assert set(run.candidates) == {"dahl/power-limited", "lugre/power-limited"}
+    lugre = run.candidates["lugre/power-limited"]
+    assert {"static_ratio", "stribeck_velocity_m_s"} <= set(lugre.model.physical_names)
+    # The data come from Dahl: LuGre's two extra parameters cannot win by BIC.
+    assert run.chosen.model.law == "dahl"
