@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml constraints.txt
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/idtool seed-study --out fits/seed-study --force
+	$(BIN)/idtool demo --force
 
 lint: $(STAMP)
 	$(BIN)/ruff check idtool tests benchmarks

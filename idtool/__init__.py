@@ -18,6 +18,17 @@ from ._dataset import Dataset, Rig, Trace, load_dataset  # noqa: E402
 from ._dataset_write import write_dataset  # noqa: E402
 from ._example import example_dataset_path, example_params_path  # noqa: E402
 from ._laws import AbstractFrictionLaw, Coulomb, Dahl, LuGre  # noqa: E402
+from ._likelihood import NOISE_MODELS  # noqa: E402
+from ._posterior_store import load_posterior, write_posterior  # noqa: E402
+from ._predict import (  # noqa: E402
+    AmplitudeFor,
+    Prediction,
+    amplitude_for_reduction,
+    predict_friction_ratio,
+    prediction_draws,
+)
+from ._prior import Prior, read_priors  # noqa: E402
+from ._sample import Posterior, sample_posterior  # noqa: E402
 from ._sim_params import BenchParams, load_bench_params  # noqa: E402
 from ._simulate import BenchTruth, TraceTruth, simulate_bench, write_simulation  # noqa: E402
 from ._transducer import (  # noqa: E402
@@ -32,7 +43,9 @@ from ._transducer import (  # noqa: E402
 __version__ = "0.1.0"
 
 __all__ = [
+    "NOISE_MODELS",
     "AbstractFrictionLaw",
+    "AmplitudeFor",
     "BenchParams",
     "BenchTruth",
     "Coulomb",
@@ -41,23 +54,33 @@ __all__ = [
     "Dataset",
     "EnergyBalance",
     "LuGre",
+    "Posterior",
+    "Prediction",
+    "Prior",
     "Rig",
     "Trace",
     "TraceTruth",
     "Transducer",
     "TransducerSteadyState",
     "__version__",
+    "amplitude_for_reduction",
     "cycle_average_curve",
     "example_dataset_path",
     "example_params_path",
     "load_bench_params",
     "load_dataset",
+    "load_posterior",
+    "predict_friction_ratio",
+    "prediction_draws",
     "prescribed_cycle_average",
+    "read_priors",
     "reversal_phase",
+    "sample_posterior",
     "simulate_bench",
     "simulate_transducer",
     "table2",
     "transducer_steady_state",
     "write_dataset",
+    "write_posterior",
     "write_simulation",
 ]

@@ -20,6 +20,10 @@ _COMMANDS = (
     "_cmd_validate",
     "_cmd_simulate_bench",
     "_cmd_fit",
+    "_cmd_sample",
+    "_cmd_predict",
+    "_cmd_report",
+    "_cmd_demo",
 )
 
 

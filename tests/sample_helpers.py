@@ -1,0 +1,54 @@
+"""Small simulated fits shared by the posterior and prediction tests (fitted once per run).
+
+The design: loads 270 and 670 N (450 N is held out), amplitudes 50% and 70%, ON times
+1 s and 2 s, 1.5 s of sliding before and after: 8 traces, about 1100 block means.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+
+import idtool
+from idtool._fitrun import FitRun, fit_dataset
+from idtool._sim_params import BenchParams
+from idtool._simulate import operating_point
+
+COVERAGE_SEEDS = tuple(range(8))
+HELD_OUT_LOAD = 450.0
+AMPLITUDES = (0.5, 0.7)
+
+
+def small_params() -> dict:
+    params = json.loads(idtool.example_params_path().read_text())
+    e = params["experiments"]
+    e["normal_loads_n"] = [270.0, 670.0]
+    e["amplitude_fractions"] = list(AMPLITUDES)
+    e["on_durations_s"] = [1.0, 2.0]
+    e["sliding_before_s"] = 1.5
+    e["sliding_after_s"] = 1.5
+    return params
+
+
+def truth() -> dict[str, float]:
+    p = small_params()
+    return {
+        "Kt": p["contact"]["contact_stiffness_n_m"],
+        "mu": p["contact"]["friction_coefficient"],
+        "coupling_gain": p["coupling"]["gain"],
+        "power_load_n": p["coupling"]["power_load_n"],
+        "slope_n_s": p["actuator"]["slope_n_s"],
+        "startup_slope_n_s": p["actuator"]["startup_slope_n_s"],
+    }
+
+
+def true_friction_ratio(load_n: float, alpha: float) -> float:
+    bp = BenchParams.from_dict(small_params())
+    return operating_point(bp, load_n, alpha)["friction_ratio"]
+
+
+@functools.cache
+def small_fit(seed: int) -> tuple[idtool.Dataset, FitRun]:
+    """The simulated dataset of ``seed`` and its fit (cached for the whole session)."""
+    dataset, _ = idtool.simulate_bench(small_params(), seed=seed)
+    return dataset, fit_dataset(dataset, seed=0)

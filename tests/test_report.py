@@ -1,0 +1,96 @@
+"""``idtool report``: a self-contained HTML page whose every section and image is there;
+a headless Chromium screenshot where Chromium is installed (CI installs it)."""
+
+import base64
+import io
+import json
+import re
+import shutil
+import subprocess
+
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
+
+import idtool
+from idtool._cli import main
+from idtool._report import SECTIONS
+
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):
+    root = tmp_path_factory.mktemp("report")
+    params = json.loads(idtool.example_params_path().read_text())
+    params["experiments"]["normal_loads_n"] = [270.0, 670.0]
+    params["experiments"]["on_durations_s"] = [2.0]
+    dataset, _ = idtool.simulate_bench(params, seed=31)
+    data = idtool.write_dataset(dataset, root / "data")
+    out = root / "fits" / "r"
+    assert main(["fit", str(data), "--out", str(out)]) == 0
+    assert main(["report", str(out)]) == 0
+    return out
+
+
+def images_of(page: str) -> list[bytes]:
+    return [base64.b64decode(m) for m in re.findall(r'src="data:image/png;base64,([^"]+)"', page)]
+
+
+def test_report_has_every_section_and_decodable_images(fitted):
+    page = (fitted / "report.html").read_text()
+    for name in SECTIONS:
+        assert f"<h2>{name}</h2>" in page, name
+    images = images_of(page)
+    assert len(images) >= 7
+    for data in images:
+        pixels = mpimg.imread(io.BytesIO(data), format="png")
+        assert pixels.ndim == 3 and min(pixels.shape[:2]) > 100
+        assert np.ptp(pixels) > 0  # not a blank image
+    assert "http://" not in page and "https://" not in page  # opens offline
+    assert "no posterior" in page.lower()  # says what to run, rather than hiding it
+
+
+def test_report_writes_figures_and_markdown(fitted):
+    figures = sorted(p.name for p in (fitted / "figures").iterdir())
+    assert {
+        "corner.png",
+        "correlation.png",
+        "fr_vs_amplitude.png",
+        "fr_vs_load.png",
+        "amplitude_map.png",
+    } <= set(figures)
+    md = (fitted / "report.md").read_text()
+    assert md.startswith("# idtool report") and "Kt" in md
+
+
+def test_report_on_a_folder_that_is_not_a_fit(tmp_path, capsys):
+    assert main(["report", str(tmp_path)]) == 2
+    assert "idtool fit" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(shutil.which("chromium") is None, reason="Debian's chromium is not installed")
+def test_report_renders_in_headless_chromium(fitted, tmp_path):
+    shot = tmp_path / "shot.png"
+    subprocess.run(
+        [
+            "chromium",
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            f"--user-data-dir={tmp_path / 'profile'}",
+            "--window-size=1200,2400",
+            f"--screenshot={shot}",
+            (fitted / "report.html").as_uri(),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=120,
+    )
+    pixels = mpimg.imread(shot)
+    assert pixels.shape[0] >= 2000 and pixels.shape[1] >= 1100
+    # Rendered content, not an empty page: many distinct colours.
+    assert np.unique(pixels.reshape(-1, pixels.shape[-1]), axis=0).shape[0] > 50

@@ -1,0 +1,279 @@
+"""The posterior (issue 5): coverage on simulated data, the noise model's honesty,
+reproducibility, checkpoints, the marginal likelihood, priors and diagnostics."""
+
+import copy
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from sample_helpers import (
+    AMPLITUDES,
+    COVERAGE_SEEDS,
+    HELD_OUT_LOAD,
+    small_fit,
+    true_friction_ratio,
+    truth,
+)
+
+import idtool
+from idtool._chainfile import read_chain
+from idtool._diagnostics import diagnose
+from idtool._errors import IdtoolError
+from idtool._fitdata import prepare_fit_data, start_values
+from idtool._fitmodel import FitModel
+from idtool._likelihood import (
+    _whiten,
+    build_target,
+    conditioning_shrinkage,
+    marginal_loglik,
+    physical_values,
+    predict_blocks,
+)
+from idtool._predict import draws_of, predict_friction_ratio
+from idtool._prior import default_prior, read_priors
+from idtool._sample import sample_posterior, sampled_params
+
+WALKERS, STEPS = 32, 300
+
+
+def covered(post, fit_model) -> dict[str, bool]:
+    """Whether each 95% interval holds the truth: shared parameters, and FR at the
+    held-out load (a prediction: no trace was measured there)."""
+    draws = post.draws()
+    out = {}
+    for name, value in truth().items():
+        lo, hi = np.percentile(draws[name], [2.5, 97.5])
+        out[name] = bool(lo <= value <= hi)
+    preds = predict_friction_ratio(draws_of(post, fit_model), [HELD_OUT_LOAD], AMPLITUDES, [0.025])
+    for p in preds:
+        true_fr = true_friction_ratio(HELD_OUT_LOAD, p.amplitude_fraction)
+        out[f"FR({HELD_OUT_LOAD:g} N, {p.amplitude_fraction:g})"] = (
+            p.ci95[0] <= true_fr <= p.ci95[1]
+        )
+    return out
+
+
+@pytest.fixture(scope="module")
+def coverage_runs():
+    """Per seed: AR(1) and independent-Gaussian posteriors of the same fit."""
+    runs = []
+    for seed in COVERAGE_SEEDS:
+        _, run = small_fit(seed)
+        fit = run.chosen
+        ar1 = sample_posterior(fit, walkers=WALKERS, steps=STEPS, seed=seed, noise="ar1")
+        iid = sample_posterior(fit, walkers=WALKERS, steps=STEPS, seed=seed, noise="gaussian")
+        runs.append((seed, fit, ar1, iid))
+    return runs
+
+
+@pytest.mark.slow
+def test_ar1_intervals_cover_the_truth_at_about_the_nominal_rate(coverage_runs):
+    """8 seeds x 8 quantities (6 shared parameters, FR at the held-out load for two
+    amplitudes) at nominal 95%: expected 60.8 of 64, binomial sd 1.7 if independent;
+    the quantities of one seed are correlated, so a bad seed costs several at once.
+    At least 80% (51 of 64) allows about two bad seeds; measured: 63/64."""
+    hits = [covered(ar1, fit.model) for _, fit, ar1, _ in coverage_runs]
+    rate = np.mean([v for h in hits for v in h.values()])
+    assert rate >= 0.80, hits
+
+
+@pytest.mark.slow
+def test_independent_noise_gives_falsely_tight_posteriors(coverage_runs):
+    """The evidence for the AR(1) default: on the same data and fit, the
+    independent-noise posterior is much narrower (sd ratio ~0.55-0.7, measured;
+    theory sqrt((1 - phi) / (1 + phi)) ~ 0.55) and covers the truth less often."""
+    ratios, hit_ar1, hit_iid = [], [], []
+    for _, fit, ar1, iid in coverage_runs:
+        a, b = ar1.draws(), iid.draws()
+        ratios.append([np.std(np.log(b[n])) / np.std(np.log(a[n])) for n in truth()])
+        hit_ar1 += list(covered(ar1, fit.model).values())
+        hit_iid += list(covered(iid, fit.model).values())
+    assert np.mean(ratios) < 0.75, np.mean(ratios, axis=0)
+    assert np.mean(hit_iid) < np.mean(hit_ar1) - 0.05, (np.mean(hit_iid), np.mean(hit_ar1))
+
+
+@pytest.mark.slow
+def test_held_out_load_prediction_is_within_0_03_and_inside_the_band(coverage_runs):
+    """Fitted on 270 and 670 N only: FR at 450 N against the simulator's truth."""
+    _, fit, ar1, _ = coverage_runs[1]
+    preds = predict_friction_ratio(draws_of(ar1, fit.model), [HELD_OUT_LOAD], AMPLITUDES, [0.025])
+    for p in preds:
+        true_fr = true_friction_ratio(HELD_OUT_LOAD, p.amplitude_fraction)
+        assert abs(p.median - true_fr) < 0.03
+        assert p.ci95[0] <= true_fr <= p.ci95[1], (p, true_fr)
+
+
+@pytest.mark.slow
+def test_walkers_leave_a_local_optimum_of_the_fit(coverage_runs):
+    """Seed 0's fit stops in a local optimum (Kt ~ 8e7): the mode search finds the
+    posterior's main mode from another multi-start optimum and says so."""
+    ar1 = coverage_runs[0][2]
+    if not ar1.warnings:
+        pytest.skip("the fit found the global optimum this time")
+    assert "local optimum" in ar1.warnings[0]
+    assert np.median(ar1.draws()["Kt"]) == pytest.approx(truth()["Kt"], rel=0.1)
+
+
+def test_posterior_width_matches_the_fits_marginal_covariance(coverage_runs):
+    """Integrating the nuisances out gives the fit's marginal widths (Laplace), where
+    holding them fixed would give far narrower ones (conditioning_shrinkage < 0.8)."""
+    _, fit, ar1, _ = coverage_runs[1]
+    k = fit.model.n_shared
+    kept = ar1.chain[ar1.diagnostics.burn :].reshape(-1, ar1.chain.shape[-1])[:, :k]
+    ratio = kept.std(axis=0) / np.sqrt(np.diag(fit.cov_z)[:k])
+    assert np.all((ratio > 0.8) & (ratio < 1.25)), ratio
+    assert np.min(conditioning_shrinkage(fit.cov_z, k)) < 0.8
+
+
+def test_same_seed_same_samples():
+    _, run = small_fit(1)
+    a = sample_posterior(run.chosen, walkers=20, steps=30, seed=3)
+    b = sample_posterior(copy.deepcopy(run.chosen), walkers=20, steps=30, seed=3)
+    c = sample_posterior(run.chosen, walkers=20, steps=30, seed=4)
+    np.testing.assert_array_equal(a.chain, b.chain)
+    np.testing.assert_array_equal(a.log_prob, b.log_prob)
+    assert not np.array_equal(a.chain, c.chain)
+
+
+def test_resumed_chain_equals_an_uninterrupted_one(tmp_path, monkeypatch):
+    _, run = small_fit(1)
+    fit = run.chosen
+    straight = sample_posterior(fit, walkers=20, steps=40, seed=5)
+    chain = tmp_path / "chain.h5"
+
+    # interrupted at step 25 (checkpoints every step), then resumed
+    import idtool._sample as sample_module
+
+    class Interrupt:
+        def __init__(self):
+            self.n = 0
+
+        def update(self, n):
+            self.n += n
+            if self.n == 25:
+                raise KeyboardInterrupt
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(sample_module, "_progress", lambda *a: Interrupt())
+    with pytest.raises(KeyboardInterrupt):
+        sample_posterior(fit, walkers=20, steps=40, seed=5, chain_path=chain, checkpoint_s=0.0)
+    monkeypatch.undo()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["chain.h5"]  # no partial file
+    saved, _, _ = read_chain(chain)
+    assert 20 <= saved.shape[0] < 25
+    resumed = sample_posterior(fit, walkers=20, steps=40, chain_path=chain, resume=True)
+    np.testing.assert_array_equal(resumed.chain, straight.chain)
+    np.testing.assert_array_equal(resumed.log_prob, straight.log_prob)
+    assert resumed.timing["steps_this_run"] == 40 - saved.shape[0]
+
+    with pytest.raises(IdtoolError, match="noise"):
+        sample_posterior(fit, steps=50, noise="gaussian", chain_path=chain, resume=True)
+
+
+def test_corrupt_chain_is_refused(tmp_path):
+    _, run = small_fit(1)
+    chain = tmp_path / "chain.h5"
+    chain.write_bytes(b"not an HDF5 file")
+    with pytest.raises(IdtoolError, match="unreadable chain"):
+        sample_posterior(run.chosen, steps=20, chain_path=chain, resume=True)
+
+
+def test_marginal_likelihood_equals_the_dense_gaussian_integral():
+    """The per-trace Cholesky algebra against log N(w; 0, sigma^2 I + s^2 J_w J_w^T)
+    on whitened residuals (two traces, so the dense matrix is small)."""
+    params = json.loads(idtool.example_params_path().read_text())
+    e = params["experiments"]
+    e.update(normal_loads_n=[450.0], amplitude_fractions=[0.5], on_durations_s=[0.5, 1.0])
+    e.update(sliding_before_s=1.0, sliding_after_s=1.0)
+    dataset, _ = idtool.simulate_bench(params, seed=2)
+    data = prepare_fit_data(dataset, periods_per_block=2)
+    model = FitModel(data, start_values(data), coupling="constant")
+    z = model.z0(Kt=1e9, coupling_gain=0.02)
+    table = {p.name: default_prior(p) for p in sampled_params(model, "ar1")}
+    target = build_target(model, z, "ar1", table)
+    theta = jnp.asarray(np.concatenate([z[: model.n_shared], [0.0, 0.4]]))
+    v = physical_values(theta, target)
+    e_res = predict_blocks(v, target) - target.force_n + 0.3  # off the optimum
+    ll, _ = marginal_loglik(e_res, v, target)
+
+    sigma, phi = float(v["sigma_n"]), float(v["phi"])
+    w = np.asarray(_whiten(e_res, target.first, phi))
+    jw = np.asarray(_whiten(target.jac_e, target.first, phi))
+    n, t = w.size, np.asarray(target.block_trace)
+    big = np.zeros((n, 4 * target.n_traces))  # nuisance columns of every trace
+    for i in range(target.n_traces):
+        big[t == i, 4 * i : 4 * i + 4] = jw[t == i]
+    cov = sigma**2 * np.eye(n) + 100.0**2 * big @ big.T
+    sign, logdet = np.linalg.slogdet(cov)
+    dense = -0.5 * (n * np.log(2 * np.pi) + logdet + w @ np.linalg.solve(cov, w))
+    dense += 0.5 * target.n_traces * np.log(1 - phi**2)
+    assert sign > 0
+    assert float(ll) == pytest.approx(dense, rel=1e-8)  # the dense side loses ~1e-9
+
+
+def test_priors_file_overrides_and_bad_files(tmp_path):
+    _, run = small_fit(1)
+    params = sampled_params(run.chosen.model, "ar1")
+    good = tmp_path / "priors.toml"
+    good.write_text('[mu]\ndist = "normal"\nmean = 0.3\nsd = 0.05\n')
+    assert read_priors(good, params)["mu"].describe() == "normal(mean=0.3, sd=0.05)"
+    as_json = tmp_path / "priors.json"
+    as_json.write_text(json.dumps({"Kt": {"dist": "loguniform", "lo": 1e6, "hi": 1e11}}))
+    assert read_priors(as_json, params)["Kt"].dist == "loguniform"
+    for text, match in (
+        ('[bogus]\ndist = "normal"\nmean = 1\nsd = 1\n', "unknown parameter"),
+        ('[mu]\ndist = "cauchy"\n', "dist = one of"),
+        ('[mu]\ndist = "normal"\nmean = 0.3\n', "takes exactly"),
+        ('[mu]\ndist = "uniform"\nlo = 5\nhi = 4\n', "lo must be below hi"),
+        ("[mu\n", "not valid TOML"),
+    ):
+        bad = tmp_path / "bad.toml"
+        bad.write_text(text)
+        with pytest.raises(IdtoolError, match=match):
+            read_priors(bad, params)
+    # a prior that excludes the fit's optimum: refused before sampling
+    narrow = tmp_path / "narrow.toml"
+    narrow.write_text('[mu]\ndist = "uniform"\nlo = 0.5\nhi = 0.6\n')
+    with pytest.raises(IdtoolError, match=r"not finite at the fit's optimum.*mu"):
+        sample_posterior(run.chosen, walkers=20, steps=20, priors=narrow)
+
+
+def test_short_chain_is_reported_not_converged_with_steps_needed():
+    rng = np.random.default_rng(0)
+    steps, walkers = 200, 16
+    # AR(1) walkers with tau = (1 + 0.95) / (1 - 0.95) = 39
+    x = np.zeros((steps, walkers, 2))
+    for i in range(1, steps):
+        x[i] = 0.95 * x[i - 1] + rng.standard_normal((walkers, 2))
+    d = diagnose(x, np.full(walkers, 0.3), ("a", "b"))
+    assert not d.converged and d.steps_needed > 200  # tau is underestimated when short
+    assert "more steps" in d.messages[0] and "--resume" in d.messages[0]
+    iid = diagnose(rng.standard_normal((4000, walkers, 2)), np.full(walkers, 0.3), ("a", "b"))
+    assert iid.converged and iid.steps_needed == 0
+    assert np.all(np.abs(iid.rhat - 1) < 0.01) and np.all(iid.ess > 30000)
+
+
+def test_jit_vmap_log_posterior_matches_the_fit_model():
+    """The sampler's block predictions (FR at distinct operating points, gathered)
+    are the fit model's."""
+    _, run = small_fit(1)
+    fit = run.chosen
+    table = {p.name: default_prior(p) for p in sampled_params(fit.model, "ar1")}
+    target = build_target(fit.model, fit.z, "ar1", table)
+    v = {p.name: p.value(jnp.asarray(fit.z[i])) for i, p in enumerate(target.params[:6])}
+    ours = jax.jit(predict_blocks)(v, target)
+    np.testing.assert_allclose(ours, fit.model.predict(jnp.asarray(fit.z)), atol=1e-10)
+
+
+@pytest.mark.parametrize("noise", ["student-t", "ar1-student-t"])
+def test_student_t_noise_models_sample(noise):
+    _, run = small_fit(1)
+    post = sample_posterior(run.chosen, walkers=20, steps=30, seed=0, noise=noise)
+    assert post.names[-1] == "nu" and np.all(np.isfinite(post.log_prob))
+    nu = post.draws()["nu"]
+    assert np.all((nu > 1) & (nu < 1000))
+    assert ("phi" in post.names) == noise.startswith("ar1")
