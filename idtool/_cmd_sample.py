@@ -108,7 +108,7 @@ def _run(args: argparse.Namespace) -> int:
         saved = f"the steps done so far are in {chain}" if chain.exists() else "nothing saved"
         print(f"idtool sample: interrupted; {saved}; continue with --resume", flush=True)
         return 130
-    target = build_target(fit.model, fit.z, post.noise, post.priors)
+    target = build_target(fit.model, post.z_lin, post.noise, post.priors)
     check = posterior_predictive(post, fit, seed=post.seed, target=target)
     shrink = conditioning_shrinkage(fit.cov_z, fit.model.n_shared)
     report = sample_report(post, fit, check, folder, shrink)

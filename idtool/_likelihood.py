@@ -311,44 +311,63 @@ def _student_t_logpdf(u: Array, nu) -> Array:
     )
 
 
-def marginal_loglik(e: Array, v: dict, target: Target) -> tuple[Array, Array]:
-    """Log-likelihood of residuals ``e`` (model - data) with the nuisances integrated
-    out (module docstring); and the nuisance shift (traces, 4) at its conditional mode.
+def marginal_loglik_batch(e: Array, v: dict, target: Target) -> tuple[Array, Array]:
+    """Log-likelihood of residuals ``e`` (walkers, blocks; model - data) with the
+    nuisances integrated out (module docstring), (walkers,); and the nuisance shift at
+    its conditional mode, (walkers, traces, 4). ``v`` maps names to (walkers,) arrays.
 
     With ``w = L e`` the whitened residuals and ``J_w = L J``: ``h = J_w^T w = J^T (L^T w)``
     and ``J_w^T J_w`` comes precomputed (:func:`_gram`), so a call costs two passes over
-    the blocks and one 4 x 4 Cholesky per trace.
+    the blocks (walkers as the fastest axis) and one 4 x 4 Cholesky per trace.
     """
     t = target
+    batch = e.shape[0]
     sigma = v["sigma_n"]
-    phi = v.get("phi", 0.0)
+    phi = v.get("phi", jnp.zeros(batch))
     student = t.noise in ("student-t", "ar1-student-t")
-    w = _whiten(e, t.first, phi)
+    w = _whiten(e.T, t.first, phi)  # (blocks, walkers)
     head = jnp.sqrt(1.0 - phi**2)
-    lt_w = jnp.where(t.first, head * w, w) - phi * jnp.where(t.continues, jnp.roll(w, -1), 0.0)
-    h = jax.ops.segment_sum(t.jac_e * lt_w[:, None], t.block_trace, t.n_traces)
-    g = t.gram[0] + phi * t.gram[1] + phi**2 * t.gram[2]
+    nxt = jnp.where(t.continues[:, None], jnp.roll(w, -1, axis=0), 0.0)
+    lt_w = jnp.where(t.first[:, None], head * w, w) - phi * nxt
+    h = jax.ops.segment_sum(t.jac_e[:, :, None] * lt_w[:, None, :], t.block_trace, t.n_traces)
+    h = jnp.moveaxis(h, -1, 0)  # (walkers, traces, 4)
+
+    def per_walker(x):  # (walkers,) -> broadcast against (walkers, traces, 4, 4)
+        return x[:, None, None, None]
+
+    g = t.gram[0] + per_walker(phi) * t.gram[1] + per_walker(phi**2) * t.gram[2]
     # Precision of the nuisances (Fisher information for Student-t), prior included.
-    info = (v["nu"] + 1.0) / (v["nu"] + 3.0) if student else 1.0
+    info = (v["nu"] + 1.0) / (v["nu"] + 3.0) if student else jnp.ones(batch)
+    scale = info / sigma**2
     prior_prec = 1.0 / NUISANCE_PRIOR_SD**2
-    a = g * (info / sigma**2) + prior_prec * jnp.eye(g.shape[-1])
+    a = g * per_walker(scale) + prior_prec * jnp.eye(g.shape[-1])
     chol = jnp.linalg.cholesky(a)
-    y = solve_triangular(chol, (-h * (info / sigma**2))[..., None], lower=True)
+    y = solve_triangular(chol, (-h * scale[:, None, None])[..., None], lower=True)
     shift = solve_triangular(jnp.swapaxes(chol, -1, -2), y, lower=False)[..., 0]
-    log_det = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol, axis1=-2, axis2=-1)))
-    n = e.shape[0]
-    p = shift.size
+    log_det = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol, axis1=-2, axis2=-1)), axis=(1, 2))
+    n = e.shape[1]
+    p = shift.shape[1] * shift.shape[2]
     if student:
-        jw = _whiten(t.jac_e, t.first, phi)
-        w_fit = w + jnp.sum(jw * shift[t.block_trace], axis=1)
-        ll = jnp.sum(_student_t_logpdf(w_fit / sigma, v["nu"])) - n * jnp.log(sigma)
-        ll = ll - 0.5 * prior_prec * jnp.sum(shift**2)
+        jw = _whiten(t.jac_e[:, :, None], t.first, phi)  # (blocks, 4, walkers)
+        moved = jnp.moveaxis(shift, 0, -1)[t.block_trace]  # (blocks, 4, walkers)
+        w_fit = w + jnp.sum(jw * moved, axis=1)
+        u = w_fit / sigma
+        ll = jnp.sum(_student_t_logpdf(u, v["nu"]), axis=0) - n * jnp.log(sigma)
+        ll = ll - 0.5 * prior_prec * jnp.sum(shift**2, axis=(1, 2))
     else:
         # min over the shift of |w + J_w s|^2 / sigma^2 + s^T s / sd^2, in closed form
-        ll = -0.5 * n * jnp.log(2.0 * jnp.pi * sigma**2) - 0.5 * jnp.sum(w**2) / sigma**2
-        ll = ll + 0.5 * jnp.sum(y**2)
+        ll = -0.5 * n * jnp.log(2.0 * jnp.pi * sigma**2) - 0.5 * jnp.sum(w**2, axis=0) / sigma**2
+        ll = ll + 0.5 * jnp.sum(y**2, axis=(1, 2, 3))
     ll = ll - 0.5 * log_det - p * math.log(NUISANCE_PRIOR_SD)
     return ll + 0.5 * t.n_traces * jnp.log1p(-(phi**2)), shift
+
+
+def marginal_loglik(e: Array, v: dict, target: Target) -> tuple[Array, Array]:
+    """:func:`marginal_loglik_batch` for one parameter set: (log-likelihood, shift)."""
+    ll, shift = marginal_loglik_batch(
+        e[None], {k: jnp.asarray(x)[None] for k, x in v.items()}, target
+    )
+    return ll[0], shift[0]
 
 
 def log_posterior_batch(theta: Array, target: Target) -> Array:
@@ -360,7 +379,7 @@ def log_posterior_batch(theta: Array, target: Target) -> Array:
         v[p.name] = p.value(theta[:, i])
         lp = lp + prior.logpdf(v[p.name]) + p.log_jacobian(theta[:, i])
     e = predict_blocks_batch(v, target) - target.force_n
-    ll = jax.vmap(lambda ee, vv: marginal_loglik(ee, vv, target)[0])(e, v)
+    ll, _ = marginal_loglik_batch(e, v, target)
     out = jnp.where(jnp.isfinite(lp), lp + ll, -jnp.inf)
     return jnp.where(jnp.isnan(out), -jnp.inf, out)
 

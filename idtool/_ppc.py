@@ -74,7 +74,7 @@ def posterior_predictive(
 ) -> PredictiveCheck:
     """Replicate the measured traces from ``n_draws`` kept draws of ``post``."""
     if target is None:
-        target = build_target(fit.model, fit.z, post.noise, post.priors)
+        target = build_target(fit.model, post.z_lin, post.noise, post.priors)
     kept = post.chain[post.diagnostics.burn :].reshape(-1, post.chain.shape[-1])
     idx = np.unique(np.linspace(0, kept.shape[0] - 1, min(n_draws, kept.shape[0])).astype(int))
     theta = kept[idx]

@@ -14,7 +14,7 @@ from idtool._fitrun import FitRun, fit_dataset
 from idtool._sim_params import BenchParams
 from idtool._simulate import operating_point
 
-COVERAGE_SEEDS = tuple(range(8))
+COVERAGE_SEEDS = tuple(range(6))
 HELD_OUT_LOAD = 450.0
 AMPLITUDES = (0.5, 0.7)
 

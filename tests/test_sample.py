@@ -70,28 +70,50 @@ def coverage_runs():
 
 @pytest.mark.slow
 def test_ar1_intervals_cover_the_truth_at_about_the_nominal_rate(coverage_runs):
-    """8 seeds x 8 quantities (6 shared parameters, FR at the held-out load for two
-    amplitudes) at nominal 95%: expected 60.8 of 64, binomial sd 1.7 if independent;
+    """6 seeds x 8 quantities (6 shared parameters, FR at the held-out load for two
+    amplitudes) at nominal 95%: expected 45.6 of 48, binomial sd 1.5 if independent;
     the quantities of one seed are correlated, so a bad seed costs several at once.
-    At least 80% (51 of 64) allows about two bad seeds; measured: 63/64."""
+    At least 80% (39 of 48) allows about two bad seeds. Measured: 48/48 here, 94/96
+    over 12 seeds x 400 steps."""
     hits = [covered(ar1, fit.model) for _, fit, ar1, _ in coverage_runs]
     rate = np.mean([v for h in hits for v in h.values()])
     assert rate >= 0.80, hits
 
 
+def z_scores(post) -> np.ndarray:
+    """(truth - posterior mean) / posterior sd of each shared parameter, on the log
+    scale: about N(0, 1) for a calibrated posterior."""
+    draws = post.draws()
+    return np.array(
+        [
+            (np.log(v) - np.mean(np.log(draws[n]))) / np.std(np.log(draws[n]))
+            for n, v in truth().items()
+        ]
+    )
+
+
 @pytest.mark.slow
 def test_independent_noise_gives_falsely_tight_posteriors(coverage_runs):
-    """The evidence for the AR(1) default: on the same data and fit, the
-    independent-noise posterior is much narrower (sd ratio ~0.55-0.7, measured;
-    theory sqrt((1 - phi) / (1 + phi)) ~ 0.55) and covers the truth less often."""
-    ratios, hit_ar1, hit_iid = [], [], []
+    """The evidence for the AR(1) default, on the same data and fits: the
+    independent-noise posterior is much narrower (sd ratio 0.57 measured; theory
+    sqrt((1 - phi) / (1 + phi)) ~ 0.55 for phi ~ 0.55), so its errors in units of its own
+    sd are too large. Measured here (6 seeds x 300 steps): mean z^2 0.45 for AR(1) (at
+    most 1: slightly conservative, AR(1) overstates the block noise's longer-lag
+    correlation), 2.0 for independent noise; coverage 48/48 against 44/48. Over 12 seeds
+    x 400 steps (8 quantities each): coverage 94/96 against 84/96."""
+    ratios, z_ar1, z_iid, hit_ar1, hit_iid = [], [], [], [], []
     for _, fit, ar1, iid in coverage_runs:
         a, b = ar1.draws(), iid.draws()
         ratios.append([np.std(np.log(b[n])) / np.std(np.log(a[n])) for n in truth()])
+        z_ar1 += list(z_scores(ar1))
+        z_iid += list(z_scores(iid))
         hit_ar1 += list(covered(ar1, fit.model).values())
         hit_iid += list(covered(iid, fit.model).values())
     assert np.mean(ratios) < 0.75, np.mean(ratios, axis=0)
-    assert np.mean(hit_iid) < np.mean(hit_ar1) - 0.05, (np.mean(hit_iid), np.mean(hit_ar1))
+    chi2_ar1, chi2_iid = np.mean(np.square(z_ar1)), np.mean(np.square(z_iid))
+    assert 0.2 < chi2_ar1 < 2.0, chi2_ar1  # 36 values; sd of the mean ~0.24 if independent
+    assert chi2_iid > 1.6 * chi2_ar1, (chi2_iid, chi2_ar1)
+    assert np.mean(hit_iid) <= np.mean(hit_ar1)
 
 
 @pytest.mark.slow
