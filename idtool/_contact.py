@@ -120,35 +120,40 @@ def prescribed_cycle_average(
     a_safe = jnp.where(vibrating, a, 1.0)
     vr = jnp.where(vibrating, v / (a_safe * w), jnp.inf)
 
-    # Phase grid: backward stretch [theta_a, 2 pi - theta_a], then forward stretch
-    # [2 pi - theta_a, theta_a + 2 pi]. For VR >= 1 the backward one has zero length.
+    # Phase grid, one row per stretch: backward [theta_a, 2 pi - theta_a], then forward
+    # [2 pi - theta_a, 2 pi + theta_a], each cut into n_phase steps. For VR >= 1 the
+    # backward one has zero length. Everything below is (2, n_phase) elementwise work
+    # and a few sums, which XLA compiles into a handful of loops (compile time is most
+    # of the time to a first result).
     theta_a = reversal_phase(vr)
-    frac = jnp.arange(n_phase + 1) / n_phase
-    back = theta_a + (_TWO_PI - 2.0 * theta_a) * frac
-    fwd = (_TWO_PI - theta_a) + 2.0 * theta_a * frac
-    theta = jnp.concatenate([back[:-1], fwd])  # (2n+1,) step edges
-    sign = jnp.concatenate([-jnp.ones(n_phase), jnp.ones(n_phase)])
-
-    th0, th1 = theta[:-1], theta[1:]
-    dtheta = th1 - th0
-    mid = 0.5 * (th0 + th1)
-    # u(th1) - u(th0), with the sine difference written to avoid cancellation.
-    du = (v / w) * dtheta + 2.0 * a * jnp.cos(mid) * jnp.sin(0.5 * dtheta)
+    start = jnp.stack([theta_a, _TWO_PI - theta_a])[:, None]
+    length = jnp.stack([_TWO_PI - 2.0 * theta_a, 2.0 * theta_a])[:, None]
+    sign = jnp.array([[-1.0], [1.0]])
+    dtheta = length / n_phase
+    th0 = start + dtheta * jnp.arange(n_phase)  # step starts
+    mid = th0 + 0.5 * dtheta
+    slide_m = v / w  # slip per radian from the sliding alone [m]
+    du = _slip_m(slide_m, a, th0, dtheta)
     du_abs = jnp.maximum(sign * du, 0.0)  # round-off can flip sign at a reversal
     v_mid = v + a * w * jnp.cos(mid)
     level = law.level_n(v_mid)
     kappa = law.decay_exponent(du_abs, level)
-    decay = jnp.exp(-kappa)
     target = sign * level
-    offset = (1.0 - decay) * target
 
-    # Periodic steady state: the fixed point of the composed one-cycle map.
-    # A sequential scan, not jax.lax.associative_scan: same result, but it compiles
-    # several times faster, and compile time is most of the time to a first result.
-    _, (prefix_a, prefix_b) = jax.lax.scan(_compose_step, (1.0, 0.0), (decay, offset))
-    one_minus_a = -jnp.expm1(-jnp.sum(kappa))
-    fb0 = prefix_b[-1] / jnp.where(one_minus_a > 0.0, one_minus_a, 1.0)
-    fb_start = jnp.concatenate([fb0[None], prefix_a[:-1] * fb0 + prefix_b[:-1]])
+    if law.constant_level:
+        # Exact over a whole stretch: each step start follows in closed form from the
+        # stretch start and the slip since (see _fb_start_constant_level).
+        fb_level = law.level_n(v)
+        k_since = law.decay_exponent(
+            jnp.maximum(sign * _slip_m(slide_m, a, start, th0 - start), 0.0), fb_level
+        )
+        k_stretch = law.decay_exponent(
+            jnp.maximum(sign * _slip_m(slide_m, a, start, length), 0.0), fb_level
+        )
+        fb_start = _fb_start_constant_level(fb_level, sign, k_since, k_stretch)
+    else:
+        decay = jnp.exp(-kappa)
+        fb_start = _fb_start_composed(kappa, decay, (1.0 - decay) * target)
 
     # Exact mean of fb over each step's slip; its phase mean to second order.
     step_mean = target + (fb_start - target) * _phi1(kappa)
@@ -177,14 +182,70 @@ def prescribed_cycle_average(
     )
 
 
+def _slip_m(slide_m: Array, a: Array, theta0: Array, dtheta: Array) -> Array:
+    """Slip ``u(theta0 + dtheta) - u(theta0)`` [m], ``u = slide_m theta + a sin(theta)``.
+
+    The sine difference is written as a product to avoid cancellation for small steps.
+    """
+    return slide_m * dtheta + 2.0 * a * jnp.cos(theta0 + 0.5 * dtheta) * jnp.sin(0.5 * dtheta)
+
+
+def _fb_start_composed(kappa: Array, decay: Array, offset: Array) -> Array:
+    """Bristle force [N] at each step start in the periodic state, any law.
+
+    ``kappa``, ``decay`` and ``offset`` are (2, n) per-step exponents and affine maps
+    ``fb -> decay fb + offset``. The periodic state is the fixed point of their
+    composition over a cycle, composed in sequence. A sequential scan, not
+    jax.lax.associative_scan: same result, but it compiles several times faster.
+    """
+    shape = kappa.shape
+    _, (prefix_a, prefix_b) = jax.lax.scan(
+        _compose_step, (1.0, 0.0), (decay.reshape(-1), offset.reshape(-1))
+    )
+    one_minus_a = -jnp.expm1(-jnp.sum(kappa))
+    fb0 = prefix_b[-1] / jnp.where(one_minus_a > 0.0, one_minus_a, 1.0)
+    fb = jnp.concatenate([fb0[None], prefix_a[:-1] * fb0 + prefix_b[:-1]])
+    return fb.reshape(shape)
+
+
+def _fb_start_constant_level(
+    level_n: Array, sign: Array, k_since: Array, k_stretch: Array
+) -> Array:
+    """Bristle force [N] at each step start in the periodic state, constant level L [N].
+
+    With L fixed (Coulomb, Dahl) the update ``fb <- s L + (fb - s L) exp(-Kt |du| / L)``
+    is exact over a whole stretch of one sign (notes §4), so every step start follows in
+    closed form from its stretch's start value and the decay exponent ``k_since``
+    (2, n) of the slip since then; the periodic state is the fixed point of the
+    backward-then-forward pair of stretch maps, whose exponents are ``k_stretch``
+    (2, 1). Same values as :func:`_fb_start_composed` to round-off, but elementwise: no
+    sequential scan to compile.
+    """
+    e_back, e_fwd = jnp.exp(-k_stretch[0, 0]), jnp.exp(-k_stretch[1, 0])
+    # fb_b, at the start of the backward stretch, is the fixed point of
+    # fb_b = L + (fb_f - L) e_fwd with fb_f = -L + (fb_b + L) e_back.
+    one_minus = -jnp.expm1(-(k_stretch[0, 0] + k_stretch[1, 0]))
+    fb_back = level_n * (1.0 - 2.0 * e_fwd + e_back * e_fwd)
+    fb_back = fb_back / jnp.where(one_minus > 0.0, one_minus, 1.0)
+    fb_fwd = -level_n + (fb_back + level_n) * e_back
+    stretch_start = jnp.stack([fb_back, fb_fwd])[:, None]
+    target = sign * level_n
+    return target + (stretch_start - target) * jnp.exp(-k_since)
+
+
 # The curve is cheap to run (about a millisecond for 41 points) but costs a few tenths
-# of a second to compile, so the time to a first result is all compilation: XLA's
-# backend optimisation level 0 roughly halves it (benchmarks/bench_curve.py).
-@functools.partial(
-    jax.jit,
-    static_argnames=("n_phase",),
-    compiler_options={"xla_backend_optimization_level": 0},
-)
+# of a second to compile, so the time to a first result is mostly compilation. These
+# XLA options cut the compile time from 0.18 s to 0.06 s (benchmarks/bench_curve.py):
+# backend optimisation level 0, the classic loop emitters instead of the newer fusion
+# emitters, and no expensive LLVM passes. The run time is unaffected at this size.
+_QUICK_COMPILE = {
+    "xla_backend_optimization_level": 0,
+    "xla_cpu_use_fusion_emitters": False,
+    "xla_llvm_disable_expensive_passes": True,
+}
+
+
+@functools.partial(jax.jit, static_argnames=("n_phase",), compiler_options=_QUICK_COMPILE)
 def cycle_average_curve(
     law: AbstractFrictionLaw,
     velocity_ratios: Float[ArrayLike, " n"],

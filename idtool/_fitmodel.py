@@ -16,6 +16,7 @@ Levenberg-Marquardt's damping assumes: bounded positive parameters as
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -26,6 +27,7 @@ from ._bench import TraceTiming, mean_force_n, on_friction_ratio
 from ._coupling import AbstractCoupling, ConstantCoupling, PowerLimitedCoupling
 from ._fitdata import FitData, StartValues
 from ._laws import AbstractFrictionLaw, Dahl, LuGre
+from ._lm import ColouredJacobian
 
 __all__ = ["TRACE_GROUPS", "FitModel", "ParamSpec"]
 
@@ -89,9 +91,12 @@ def _physical_specs(law: str, coupling: str) -> list[ParamSpec]:
     return specs
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, eq=False)
 class FitModel:
-    """The model of one dataset for one friction law and one coupling law."""
+    """The model of one dataset for one friction law and one coupling law.
+
+    Compared by identity: its compiled solvers (:mod:`idtool._fit`) are cached on it.
+    """
 
     data: FitData
     start: StartValues
@@ -134,6 +139,19 @@ class FitModel:
     @property
     def physical_names(self) -> tuple[str, ...]:
         return tuple(p.name for p in self.specs if p.physical)
+
+    @property
+    def param_group(self) -> np.ndarray:
+        """Per parameter: -1 if shared, else the trace whose residuals it alone moves."""
+        n = self.data.n_traces
+        return np.concatenate(
+            [np.full(self.n_shared, -1), np.tile(np.arange(n), len(TRACE_GROUPS))]
+        )
+
+    @functools.cached_property
+    def jacobian_structure(self) -> ColouredJacobian:
+        """Sparsity of the residuals' Jacobian (per-trace nuisances touch their trace)."""
+        return ColouredJacobian.from_groups(self.param_group, self.data.block_trace)
 
     def values(self, z: Float[Array, " p"]) -> dict[str, Array]:
         """Physical values: shared names map to scalars, per-trace groups to arrays."""

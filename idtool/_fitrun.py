@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._dataset import Dataset
-from ._fit import FitResult, _make_solvers, fit_model, fit_start
+from ._fit import FitResult, fit_model, fit_start, solvers
 from ._fitdata import FitData
 
 __all__ = ["FitRun", "Profile", "fit_dataset", "profile_parameter"]
@@ -103,7 +103,7 @@ def profile_parameter(result: FitResult, name: str, n_points: int = 9) -> Profil
     the rise of -2 log L (``(RSS - RSS_min) / sigma^2``) stays below 3.84.
     """
     model = result.model
-    _, run_masked, residuals = result.solvers or _make_solvers(model)
+    lm = solvers(model).lm
     i = model.names.index(name)
     se = float(np.sqrt(result.cov_z[i, i]))
     grid = result.z[i] + se * np.linspace(-3.0, 3.0, n_points)
@@ -116,8 +116,8 @@ def profile_parameter(result: FitResult, name: str, n_points: int = 9) -> Profil
     for order in (range(mid, n_points), range(mid, -1, -1)):
         z = jnp.asarray(result.z)
         for j in order:
-            z, _, _ = run_masked(z.at[i].set(grid[j]), mask, result.phi)
-            rss = float(jnp.sum(residuals(z, result.phi) ** 2))
+            out = lm(z.at[i].set(grid[j]), mask, result.phi, 100)
+            z, rss = out.z, 2.0 * float(out.loss)
             delta[j] = (rss - result.rss) / sigma2
     values = [float(model.specs[i].value(jnp.asarray(zi))) for zi in grid]
     v, d = np.array(values), delta

@@ -23,6 +23,7 @@ The friction force is ``F = fb + s1 dz/dt + s2 V`` with ``dz/dt = V (1 - s fb / 
 from __future__ import annotations
 
 import abc
+from typing import ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -35,6 +36,10 @@ class AbstractFrictionLaw(eqx.Module):
     """A rate-independent-in-form friction law on the bristle force ``fb`` [N]."""
 
     fc_n: eqx.AbstractVar[Float[ArrayLike, ""]]
+    # True when the level L does not depend on V (Coulomb, Dahl): the slip update is
+    # then exact over any stretch of one sign, which lets the contact solver write the
+    # whole cycle in closed form instead of composing step maps in sequence.
+    constant_level: ClassVar[bool] = True
 
     def level_n(self, v_m_s: Float[ArrayLike, "*b"]) -> Float[Array, "*b"]:
         """Steady bristle force ``L(V) = Kt g(V)`` [N] at slip velocity V [m/s] (eq. 2).
@@ -60,19 +65,6 @@ class AbstractFrictionLaw(eqx.Module):
     def viscous_n_s_m(self) -> Float[Array, ""]:
         """Viscous coefficient s2 [N s/m]; zero unless the law is LuGre."""
         return jnp.zeros(())
-
-    def slip_map(
-        self, du_m: Float[ArrayLike, "*b"], v_m_s: Float[ArrayLike, "*b"]
-    ) -> tuple[Float[Array, "*b"], Float[Array, "*b"]]:
-        """Affine map ``fb -> A fb + B`` over a slip increment ``du`` [m] of one sign.
-
-        ``v_m_s`` is the slip velocity at which the level ``L(V)`` is evaluated (its
-        midpoint value over the increment); exact for Dahl and Coulomb.
-        """
-        du_m = jnp.asarray(du_m)
-        level = self.level_n(v_m_s)
-        a = jnp.exp(-self.decay_exponent(jnp.abs(du_m), level))
-        return a, (1.0 - a) * jnp.sign(du_m) * level
 
     def off_force_n(self, v_m_s: Float[ArrayLike, "*b"]) -> Float[Array, "*b"]:
         """Friction force [N] in steady sliding at constant speed ``v_m_s`` > 0."""
@@ -152,6 +144,7 @@ class LuGre(AbstractFrictionLaw):
     vs_m_s: Float[ArrayLike, ""]
     s1_n_s_m: Float[ArrayLike, ""] = 0.0
     s2_n_s_m: Float[ArrayLike, ""] = 0.0
+    constant_level: ClassVar[bool] = False
 
     def level_n(self, v_m_s):
         v = jnp.asarray(v_m_s)

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 __all__ = ["provenance"]
 
-_PACKAGES = ("idtool", "jax", "jaxlib", "equinox", "optimistix", "numpy", "scipy", "pandas")
+_PACKAGES = ("idtool", "jax", "jaxlib", "equinox", "numpy", "scipy", "pandas", "emcee", "arviz")
 
 
 def _version(name: str) -> str | None:

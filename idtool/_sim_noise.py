@@ -7,7 +7,6 @@ output exactly.
 from __future__ import annotations
 
 import numpy as np
-import scipy.signal
 
 __all__ = ["ar1_noise", "lsb_decimals", "mains_hum", "quantise", "white_noise"]
 
@@ -31,6 +30,8 @@ def ar1_noise(
     phi = float(np.exp(-1.0 / (sample_rate_hz * correlation_time_s)))
     start = rng.normal(0.0, std_n)
     innovations = rng.normal(0.0, std_n * np.sqrt(1.0 - phi**2), n)
+    import scipy.signal  # here, not at the top: 0.2 s of import that only simulation needs
+
     out, _ = scipy.signal.lfilter([1.0], [1.0, -phi], innovations, zi=[phi * start])
     return np.asarray(out, dtype=np.float64)
 

@@ -8,6 +8,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from sample_helpers import small_params
+from sample_helpers import truth as small_truth
 from scipy.integrate import solve_ivp
 
 import idtool
@@ -75,6 +77,17 @@ def test_short_on_windows_that_never_reach_the_on_level():
     reached = [t.reaches_on_level for t in truth.traces]
     assert not all(reached)  # the point of the test: several ON levels are never seen
     assert_recovered(fit_dataset(dataset, seed=1), truth_of(params))
+
+
+def test_a_spurious_multistart_basin_does_not_win():
+    """Seed 0 of the small two-load design (tests/sample_helpers.py): ranked with the
+    nuisances at their start values, a low-Kt basin (~1e8 N/m) edges out the true one,
+    and polishing only it stopped there (RSS 94.8 against 91.5). fit_model polishes
+    the close distinct optima jointly and keeps the lowest."""
+    dataset, _ = idtool.simulate_bench(small_params(), seed=0)
+    run = fit_dataset(dataset, seed=0)
+    assert len(run.chosen.optima) >= 2
+    assert_recovered(run, {k: v for k, v in small_truth().items() if k in PHYSICAL})
 
 
 def test_single_load_warns_that_the_coupling_cannot_be_told_apart():

@@ -1,0 +1,122 @@
+"""The Levenberg-Marquardt solver with a coloured Jacobian (idtool._lm), checked against
+dense JAX Jacobians and SciPy's least_squares."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+import idtool
+from idtool._fit import fit_start, model_for
+from idtool._lm import ColouredJacobian, levenberg_marquardt, normal_equations
+
+# Three groups of decays sharing a rate k; each group has its own amplitude and offset.
+TIMES = np.linspace(0.0, 3.0, 40)
+GROUPS = 3
+
+
+def decay_problem(seed: int = 0):
+    rng = np.random.default_rng(seed)
+    amp, off, k = np.array([1.0, 2.0, 0.5]), np.array([0.1, -0.2, 0.3]), 1.3
+    y = amp[:, None] * np.exp(-k * TIMES) + off[:, None]
+    y = (y + 0.01 * rng.standard_normal(y.shape)).ravel()
+    row_group = np.repeat(np.arange(GROUPS), TIMES.size)
+    # z = [log k, amp_0..2, off_0..2]
+    param_group = np.array([-1, 0, 1, 2, 0, 1, 2])
+
+    def residuals(z, scale=1.0):
+        model = z[1:4, None] * jnp.exp(-jnp.exp(z[0]) * TIMES) + z[4:7, None]
+        return scale * (model.ravel() - y)
+
+    return residuals, ColouredJacobian.from_groups(param_group, row_group)
+
+
+def test_colouring_uses_one_tangent_per_shared_parameter_and_per_group_slot():
+    _, structure = decay_problem()
+    assert structure.seeds.shape == (3, 7)  # k; amplitudes; offsets
+    np.testing.assert_array_equal(structure.colour, [0, 1, 1, 1, 2, 2, 2])
+
+
+def test_normal_equations_equal_the_dense_jacobians_on_a_toy_problem():
+    fn, structure = decay_problem()
+    z = jnp.array([0.1, 0.9, 1.8, 0.6, 0.0, 0.1, 0.2])
+    r, jtj, jtr = normal_equations(fn, z, structure)
+    jac = jax.jacfwd(fn)(z)
+    np.testing.assert_allclose(r, fn(z), rtol=0, atol=0)
+    np.testing.assert_allclose(jtj, jac.T @ jac, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(jtr, jac.T @ fn(z), rtol=1e-12, atol=1e-12)
+
+
+def test_normal_equations_equal_the_dense_jacobians_for_the_bench_model():
+    """The fit's whitened residuals mix neighbouring blocks, but never across traces,
+    so the colouring stays exact (rel 1e-10: only summation order differs)."""
+    data = fit_start(idtool.load_dataset(idtool.example_dataset_path()), periods_per_block=2)
+    model = model_for(data, "dahl", "power-limited")
+    rng = np.random.default_rng(1)
+    z = jnp.asarray(model.z0() + 0.3 * rng.standard_normal(len(model.names)))
+
+    def fn(zz):
+        return model.residuals(zz, 0.5)
+
+    _, jtj, jtr = jax.jit(lambda zz: normal_equations(fn, zz, model.jacobian_structure))(z)
+    jac = jax.jit(jax.jacfwd(fn))(z)
+    scale = np.sqrt(np.outer(np.diag(jac.T @ jac), np.diag(jac.T @ jac)))
+    assert np.max(np.abs(jtj - jac.T @ jac) / scale) < 1e-10
+    np.testing.assert_allclose(jtr, jac.T @ fn(z), rtol=1e-9, atol=1e-9 * np.max(np.abs(jtr)))
+    assert model.jacobian_structure.seeds.shape[0] == model.n_shared + 4  # 10, not 102
+
+
+def test_lm_matches_scipy_least_squares():
+    fn, structure = decay_problem()
+    z0 = np.array([0.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+    out = jax.jit(levenberg_marquardt, static_argnums=0)(
+        fn, structure, jnp.asarray(z0), 1.0, jnp.ones(7, bool), 100
+    )
+    ref = least_squares(lambda z: np.asarray(fn(jnp.asarray(z))), z0, xtol=1e-15, ftol=1e-15)
+    assert bool(out.converged)
+    # Agreement in standard errors: the stopping rule promises sqrt(1e-8) = 1e-4.
+    jac = np.asarray(jax.jacfwd(fn)(jnp.asarray(ref.x)))
+    sigma2 = 2 * ref.cost / (jac.shape[0] - jac.shape[1])
+    se = np.sqrt(np.diag(sigma2 * np.linalg.inv(jac.T @ jac)))
+    assert np.max(np.abs(np.asarray(out.z) - ref.x) / se) < 1e-3
+    assert float(out.loss) == pytest.approx(ref.cost, rel=1e-10)
+    # The returned normal equations are those at the solution.
+    np.testing.assert_allclose(out.jtj, jac.T @ jac, rtol=1e-6)
+
+
+def test_masked_parameters_stay_put_and_the_rest_is_optimal_given_them():
+    fn, structure = decay_problem()
+    z0 = jnp.array([0.5, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+    mask = jnp.array([False, True, True, True, True, True, True])
+    out = levenberg_marquardt(fn, structure, z0, 1.0, mask, 100)
+    assert float(out.z[0]) == 0.5
+    # With k fixed the model is linear in the rest: compare with the linear solve.
+    basis = np.exp(-np.exp(0.5) * TIMES)
+    y = -np.asarray(fn(jnp.zeros(7)))  # the data (the model is zero at z = 0)
+    for g in range(GROUPS):
+        a = np.column_stack([basis, np.ones_like(basis)])
+        coef = np.linalg.lstsq(a, y[g * TIMES.size : (g + 1) * TIMES.size], rcond=None)[0]
+        np.testing.assert_allclose(np.asarray(out.z)[[1 + g, 4 + g]], coef, rtol=1e-6, atol=1e-8)
+
+
+def test_max_steps_stops_the_loop_and_says_not_converged():
+    fn, structure = decay_problem()
+    z0 = jnp.array([2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    out = levenberg_marquardt(fn, structure, z0, 1.0, jnp.ones(7, bool), 2)
+    assert int(out.steps) == 2
+    assert not bool(out.converged)
+
+
+def test_lm_matches_optimistix_levenberg_marquardt():
+    """Same optimum as optimistix's LevenbergMarquardt (dense Jacobians), the solver
+    this module replaces in the fit."""
+    import optimistix as optx
+
+    fn, structure = decay_problem(seed=3)
+    z0 = jnp.array([0.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+    ours = levenberg_marquardt(fn, structure, z0, 1.0, jnp.ones(7, bool), 100)
+    ref = optx.least_squares(
+        lambda z, _: fn(z), optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12), z0, max_steps=200
+    )
+    np.testing.assert_allclose(ours.z, ref.value, rtol=1e-5, atol=1e-7)
