@@ -238,14 +238,14 @@ def _fb_start_constant_level(
 # XLA options cut the compile time from 0.18 s to 0.06 s (benchmarks/bench_curve.py):
 # backend optimisation level 0, the classic loop emitters instead of the newer fusion
 # emitters, and no expensive LLVM passes. The run time is unaffected at this size.
-_QUICK_COMPILE = {
+QUICK_COMPILE = {
     "xla_backend_optimization_level": 0,
     "xla_cpu_use_fusion_emitters": False,
     "xla_llvm_disable_expensive_passes": True,
 }
 
 
-@functools.partial(jax.jit, static_argnames=("n_phase",), compiler_options=_QUICK_COMPILE)
+@functools.partial(jax.jit, static_argnames=("n_phase",), compiler_options=QUICK_COMPILE)
 def cycle_average_curve(
     law: AbstractFrictionLaw,
     velocity_ratios: Float[ArrayLike, " n"],

@@ -27,7 +27,7 @@ from ._bench import TraceTiming, mean_force_n, on_friction_ratio
 from ._coupling import AbstractCoupling, ConstantCoupling, PowerLimitedCoupling
 from ._fitdata import FitData, StartValues
 from ._laws import AbstractFrictionLaw, Dahl, LuGre
-from ._lm import ColouredJacobian
+from ._lm import ColouredJacobian, normal_equations
 
 __all__ = ["TRACE_GROUPS", "FitModel", "ParamSpec"]
 
@@ -209,10 +209,20 @@ class FitModel:
             jnp.shape(load_n)
         )
 
+    @functools.cached_property
+    def operating_points(self) -> tuple[np.ndarray, np.ndarray]:
+        """The distinct (load [N], amplitude fraction, speed [m/s]) rows of the traces,
+        and each trace's row: repeated traces share one contact solve."""
+        d = self.data
+        ops = np.stack([d.normal_load_n, d.amplitude_fraction, d.pull_speed_m_s], axis=1)
+        unique, index = np.unique(ops, axis=0, return_inverse=True)
+        return unique, index.ravel()
+
     def levels(self, v: dict[str, Array]) -> tuple[Array, Array, Array]:
         """Per trace: OFF level [N], ON level [N] and friction ratio."""
         d = self.data
-        fr = self.friction_ratios(v, d.normal_load_n, d.amplitude_fraction, d.pull_speed_m_s)
+        ops, index = self.operating_points
+        fr = self.friction_ratios(v, ops[:, 0], ops[:, 1], ops[:, 2])[index]
         off = jax.vmap(lambda n, s: self.law_at(v, n).off_force_n(s))(
             jnp.asarray(d.normal_load_n), jnp.asarray(d.pull_speed_m_s)
         )
@@ -220,9 +230,16 @@ class FitModel:
 
     def predict(self, z: Float[Array, " p"]) -> Float[Array, " blocks"]:
         """Block-mean load-cell force [N] for every block of every trace."""
+        off, on, _ = self.levels(self.values(z))
+        return self.predict_at_levels(z, off, on)
+
+    def predict_at_levels(
+        self, z: Float[Array, " p"], off_n: Float[Array, " traces"], on_n: Float[Array, " traces"]
+    ) -> Float[Array, " blocks"]:
+        """:meth:`predict` with the per-trace OFF and ON levels [N] given: the physical
+        parameters act on the traces only through them."""
         d = self.data
         v = self.values(z)
-        off, on, _ = self.levels(v)
         bt = d.block_trace
 
         def per_block(x):
@@ -235,8 +252,8 @@ class FitModel:
         )
         force = mean_force_n(
             d.sub_time_s,
-            per_block(off),
-            per_block(on),
+            per_block(off_n),
+            per_block(on_n),
             timing,
             v["slope_n_s"],
             v["startup_slope_n_s"],
@@ -245,10 +262,53 @@ class FitModel:
         )
         return force.mean(axis=1)
 
+    @functools.cached_property
+    def level_structure(self) -> ColouredJacobian:
+        """Sparsity of the residuals in ``u = (OFF levels, ON levels, z[k:])``, the
+        bench model's own inputs (see :meth:`normal_equations`): 8 colours."""
+        m, k = self.data.n_traces, len(self.physical_names)
+        groups = np.concatenate([np.arange(m), np.arange(m), self.param_group[k:]])
+        return ColouredJacobian.from_groups(groups, self.data.block_trace)
+
+    def normal_equations(
+        self, z: Float[Array, " p"], phi: float | Array
+    ) -> tuple[Array, Array, Array]:
+        """Whitened residuals ``r``, ``J^T J`` and ``J^T r`` at ``z``.
+
+        The physical parameters reach the traces only through the per-trace OFF and ON
+        levels, so the Jacobian is taken in the bench model's inputs ``u = (OFF, ON,
+        z[k:])`` with one JVP per colour of :attr:`level_structure` (8; the contact model
+        stays out of them) and mapped back by the chain rule, ``J = J_u T`` with
+        ``T = du/dz``: the levels' small Jacobian in the physical parameters, the
+        identity for the rest.
+        """
+        k, m = len(self.physical_names), self.data.n_traces
+        z = jnp.asarray(z)
+
+        def levels(zp):
+            off, on, _ = self.levels(self.values(z.at[:k].set(zp)))
+            return jnp.concatenate([off, on])
+
+        def resid(u):
+            zz = jnp.concatenate([z[:k], u[2 * m :]])
+            e = self.predict_at_levels(zz, u[:m], u[m : 2 * m]) - self.data.force_n
+            return self._whiten(e, phi)
+
+        dlv = jax.jacfwd(levels)(z[:k])  # (2 m, k)
+        u = jnp.concatenate([levels(z[:k]), z[k:]])
+        r, jtj_u, jtr_u = normal_equations(resid, u, self.level_structure)
+        n_rest = z.size - k
+        t = jnp.block(
+            [[dlv, jnp.zeros((2 * m, n_rest))], [jnp.zeros((n_rest, k)), jnp.eye(n_rest)]]
+        )
+        return r, t.T @ jtj_u @ t, t.T @ jtr_u
+
     def residuals(self, z: Float[Array, " p"], phi: float | Array = 0.0) -> Array:
         """AR(1)-whitened residuals: ``e_t - phi e_{t-1}`` within each trace, and
         ``sqrt(1 - phi^2) e_1`` at each trace's first block (exact AR(1) likelihood)."""
-        e = self.predict(z) - self.data.force_n
+        return self._whiten(self.predict(z) - self.data.force_n, phi)
+
+    def _whiten(self, e: Array, phi: float | Array) -> Array:
         first = np.zeros(self.data.n_blocks, bool)
         first[self.data.first_block] = True
         shifted = jnp.roll(e, 1)

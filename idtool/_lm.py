@@ -5,10 +5,12 @@ a few nuisances per trace (offset, pull start, horn lags), and each trace's resi
 depend on its own nuisances only. The Jacobian is then block-arrow shaped: of its ~100
 columns, the per-trace ones touch disjoint rows. Columns that never share a row can be
 given one colour and probed by a single forward-mode product (Curtis, Powell and Reid
-1974), so a Jacobian costs ``n_shared + n_groups`` JVPs (10 on the example) instead of
-one per parameter (102). optimistix's LevenbergMarquardt materialises the dense Jacobian
-column by column, which made it ~10x slower per step here; this module keeps its
-algorithm (Moré-scaled damping, Nielsen's update of the damping) and adds the colouring.
+1974), so a Jacobian costs ``n_shared + n_slots`` JVPs (10 on the example) instead of
+one per parameter (102); :meth:`idtool._fitmodel.FitModel.normal_equations` goes to 8 by
+differentiating the bench model in its per-trace levels. optimistix's
+LevenbergMarquardt builds the dense Jacobian column by column (about 14x the work per
+step here, benchmarks/bench_fit.py); this module keeps the classical algorithm
+(Moré-scaled damping, Nielsen's update of the damping) around the coloured Jacobian.
 
 The normal equations ``J^T J`` and ``J^T r`` are assembled from per-trace sums of the
 coloured columns, never from the dense Jacobian. Everything is pure JAX and jittable;
@@ -44,10 +46,10 @@ class ColouredJacobian(eqx.Module):
         row_group: (n,) group of each residual row.
     """
 
-    seeds: Float[Array, "c p"]
-    colour: Int[Array, " p"]
-    active: Float[Array, "m p"]
-    row_group: Int[Array, " n"]
+    seeds: Float[np.ndarray, "c p"]
+    colour: Int[np.ndarray, " p"]
+    active: Float[np.ndarray, "m p"]
+    row_group: Int[np.ndarray, " n"]
     n_groups: int = eqx.field(static=True)
 
     @classmethod
@@ -75,11 +77,13 @@ class ColouredJacobian(eqx.Module):
             shared[None, :], 1.0, param_group[None, :] == np.arange(n_groups)[:, None]
         )
         seeds = (colour[None, :] == np.arange(n_colours)[:, None]).astype(float)
+        # NumPy, not JAX, arrays: the structure may first be built inside a trace (a
+        # cached property), and it must not capture that trace's values.
         return cls(
-            seeds=jnp.asarray(seeds),
-            colour=jnp.asarray(colour),
-            active=jnp.asarray(active.astype(float)),
-            row_group=jnp.asarray(row_group),
+            seeds=seeds,
+            colour=colour,
+            active=active.astype(float),
+            row_group=row_group,
             n_groups=n_groups,
         )
 
@@ -135,6 +139,8 @@ def levenberg_marquardt(
     mask: Bool[Array, " p"],
     max_steps: int | Array = 100,
     tol: float = 1e-8,
+    max_step: float = 5.0,
+    equations: Callable[[Array, Any], tuple[Array, Array, Array]] | None = None,
 ) -> LMResult:
     """Minimise ``0.5 |fn(z, args)|^2`` over the parameters in ``mask``.
 
@@ -144,14 +150,22 @@ def levenberg_marquardt(
     every direction, whatever the parameters' scales and correlations. Stops early
     after ``max_steps`` iterations (a traced value: no recompilation) or if the damping
     explodes (no downhill step exists in floating point).
+
+    No step moves a parameter by more than ``max_step`` on the internal scale.
+
+    ``equations(z, args) -> (r, J^T J, J^T r)``, if given, replaces the coloured
+    :func:`normal_equations` of ``structure`` (for a cheaper Jacobian of a subset).
     """
     z0 = jnp.asarray(z0, float)
 
     def resid(z):
         return fn(z, args)
 
-    def equations(z):
-        r, jtj, jtr = normal_equations(resid, z, structure)
+    def linearise(z):
+        if equations is None:
+            r, jtj, jtr = normal_equations(resid, z, structure)
+        else:
+            r, jtj, jtr = equations(z, args)
         a, g = _masked(jtj, jtr, mask)
         return r, jtj, jtr, a, g
 
@@ -161,7 +175,7 @@ def levenberg_marquardt(
         gn = jnp.linalg.solve(a + jitter, g)
         return jnp.dot(g, gn) <= tol * 2.0 * loss / n
 
-    r, jtj, jtr, a, g = equations(z0)
+    r, jtj, jtr, a, g = linearise(z0)
     n = r.size
     loss = 0.5 * jnp.dot(r, r)
     state = dict(
@@ -171,7 +185,8 @@ def levenberg_marquardt(
         jtr=jtr,
         a=a,
         g=g,
-        damping=1e-3 * jnp.max(jnp.diag(a)),
+        damping=jnp.asarray(1e-3),  # relative to each curvature (Moré scaling below)
+        scale=jnp.diag(a),
         nu=jnp.asarray(2.0),
         steps=jnp.asarray(0),
         n_jac=jnp.asarray(1),
@@ -184,19 +199,26 @@ def levenberg_marquardt(
         return ~s["done"] & ~s["failed"] & (s["steps"] < max_steps)
 
     def body(s):
-        # Moré's scaling: damp each parameter in proportion to its curvature.
-        scale = jnp.maximum(jnp.diag(s["a"]), 1e-12 * jnp.max(jnp.diag(s["a"])))
+        # Moré's scaling: damp each parameter in proportion to the largest curvature
+        # it has shown so far. A running maximum, so that a direction that turns flat
+        # (a bounded parameter saturating) cannot take an unbounded step.
+        scale = jnp.maximum(s["scale"], jnp.diag(s["a"]))
+        scale = jnp.maximum(scale, 1e-12 * jnp.max(scale))
         h = jnp.linalg.solve(s["a"] + s["damping"] * jnp.diag(scale), -s["g"])
         h = jnp.where(mask, h, 0.0)
+        # The internal scale is of order one (a bounded parameter spans its range
+        # within |z| < 10): a longer step only happens along a direction gone flat,
+        # which the damping cannot hold, so it is cut back.
+        h = h * jnp.minimum(1.0, max_step / jnp.maximum(jnp.max(jnp.abs(h)), 1e-300))
         z_new = s["z"] + h
         r_new = resid(z_new)
         loss_new = 0.5 * jnp.dot(r_new, r_new)
-        predicted = 0.5 * jnp.dot(h, s["damping"] * scale * h - s["g"])
+        predicted = -jnp.dot(s["g"], h) - 0.5 * jnp.dot(h, s["a"] @ h)
         gain = (s["loss"] - loss_new) / jnp.maximum(predicted, 1e-300)
         accept = jnp.isfinite(loss_new) & (gain > 0.0)
 
         def accepted(s):
-            _, jtj, jtr, a, g = equations(z_new)
+            _, jtj, jtr, a, g = linearise(z_new)
             shrink = jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
             return s | dict(
                 z=z_new,
@@ -216,6 +238,7 @@ def levenberg_marquardt(
 
         s = jax.lax.cond(accept, accepted, rejected, s)
         return s | dict(
+            scale=scale,
             steps=s["steps"] + 1,
             n_res=s["n_res"] + 1,
             failed=~(s["damping"] < 1e30),

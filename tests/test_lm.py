@@ -65,6 +65,12 @@ def test_normal_equations_equal_the_dense_jacobians_for_the_bench_model():
     assert np.max(np.abs(jtj - jac.T @ jac) / scale) < 1e-10
     np.testing.assert_allclose(jtr, jac.T @ fn(z), rtol=1e-9, atol=1e-9 * np.max(np.abs(jtr)))
     assert model.jacobian_structure.seeds.shape[0] == model.n_shared + 4  # 10, not 102
+    # What the fit uses: the chain rule through the per-trace levels (8 JVPs).
+    r2, jtj2, jtr2 = jax.jit(model.normal_equations)(z, 0.5)
+    np.testing.assert_allclose(r2, fn(z), rtol=1e-12, atol=1e-10)
+    assert np.max(np.abs(jtj2 - jac.T @ jac) / scale) < 1e-9
+    np.testing.assert_allclose(jtr2, jac.T @ fn(z), rtol=1e-8, atol=1e-9 * np.max(np.abs(jtr)))
+    assert model.level_structure.seeds.shape[0] == 8
 
 
 def test_lm_matches_scipy_least_squares():
