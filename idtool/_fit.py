@@ -30,12 +30,10 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array
 
-from ._contact import QUICK_COMPILE as _QUICK_COMPILE
 from ._dataset import Dataset
 from ._fitdata import FitData, prepare_fit_data, start_values
-from ._fitmodel import TRACE_GROUPS, FitModel
+from ._fitmodel import FitModel
 from ._lm import LMResult, levenberg_marquardt
 
 __all__ = [
@@ -100,8 +98,7 @@ class FitResult:
     optima: list[dict]
     warnings: list[str]
     lm_steps: int
-    residual_evaluations: int  # plain evaluations (LM trial points)
-    jacobian_evaluations: int  # coloured Jacobians, one JVP per colour each
+    jacobian_evaluations: int  # linearisations: residuals plus one JVP per colour
 
     @property
     def n_data(self) -> int:
@@ -125,14 +122,10 @@ class Solvers(NamedTuple):
     every start, polish, AR(1) round and profile point).
 
     ``lm(z0, mask, phi, max_steps)`` runs :func:`idtool._lm.levenberg_marquardt` on the
-    AR(1)-whitened residuals; ``residuals(z, phi)`` evaluates them; ``values(z)`` gives
-    every parameter's value in its unit followed by the per-trace friction ratios, and
-    their Jacobian in ``z`` (for the delta method).
+    AR(1)-whitened residuals (and returns them, with the per-trace levels).
     """
 
     lm: Callable[..., LMResult]
-    residuals: Callable[[Array, Array | float], Array]
-    values: Callable[[Array], tuple[Array, Array]]
 
 
 def solvers(model: FitModel) -> Solvers:
@@ -152,21 +145,7 @@ def solvers(model: FitModel) -> Solvers:
             equations=model.normal_equations,
         )
 
-    def flat_values(z):
-        v = model.values(z)
-        _, _, fr = model.levels(v)
-        shared = jnp.stack([v[s.name] for s in model.specs[: model.n_shared]])
-        return jnp.concatenate([shared, *(v[g] for g, _, _ in TRACE_GROUPS), fr])
-
-    def values(z):
-        return flat_values(z), jax.jacfwd(flat_values)(z)
-
-    out = Solvers(
-        jax.jit(lm, compiler_options=_COMPILE),
-        # Run a few times per fit: compile time matters more than run time.
-        jax.jit(model.residuals, compiler_options=_QUICK_COMPILE),
-        jax.jit(values, compiler_options=_QUICK_COMPILE),
-    )
+    out = Solvers(jax.jit(lm, compiler_options=_COMPILE))
     model.__dict__["_solvers"] = out  # frozen dataclass: cache beside its fields
     return out
 
@@ -196,6 +175,19 @@ def _ar1(e: np.ndarray, data: FitData) -> float:
     first[data.first_block] = True
     num = np.sum((e[1:] * e[:-1])[~first[1:]])
     return float(np.clip(num / np.sum(e**2), -0.99, 0.99))
+
+
+def _unwhiten(w: np.ndarray, phi: float, data: FitData) -> np.ndarray:
+    """Residuals ``e`` from AR(1)-whitened ones (inverse of FitModel.residuals'
+    whitening): ``e_1 = w_1 / sqrt(1 - phi^2)``, ``e_t = w_t + phi e_(t-1)``."""
+    e = np.array(w, float)
+    starts = set(np.asarray(data.first_block).tolist())
+    for t in range(e.size):
+        if t in starts:
+            e[t] = w[t] / math.sqrt(1.0 - phi**2)
+        else:
+            e[t] = w[t] + phi * e[t - 1]
+    return e
 
 
 def _loglik(w: np.ndarray, phi: float, n_traces: int) -> tuple[float, float]:
@@ -253,18 +245,17 @@ def fit_model(
 ) -> FitResult:
     """Fit one law and coupling to prepared data; see the module docstring."""
     model = model_for(data, law, coupling)
-    lm, residuals, _ = solvers(model)
+    lm = solvers(model).lm
     k = len(model.physical_names)
     base = model.z0()
     physical = jnp.asarray(np.arange(base.size) < k)
     everything = jnp.ones(base.size, bool)
-    count = {"steps": 0, "jacobians": 0, "residuals": 0}
+    count = {"steps": 0, "jacobians": 0}
 
     def run(z, mask, phi, max_steps):
         out = lm(jnp.asarray(z), mask, phi, max_steps)
         count["steps"] += int(out.steps)
         count["jacobians"] += int(out.n_jacobians)
-        count["residuals"] += int(out.n_residuals)
         return out
 
     # 2. multi-start over the physical parameters, nuisances at their start values
@@ -308,7 +299,7 @@ def fit_model(
     # then AR(1) whitening until phi settles
     phi = 0.0
     for _ in range(3):
-        new_phi = _ar1(np.asarray(residuals(best.z, 0.0)), data)
+        new_phi = _ar1(_unwhiten(np.asarray(best.residuals), phi, data), data)
         # Stop once phi settles (the estimates then move far less than their errors);
         # phi stays the one the parameters were fitted with.
         if abs(new_phi - phi) < 0.02:
@@ -318,13 +309,29 @@ def fit_model(
     return _summarise(model, best, phi, optima, count)
 
 
+def _values_and_jacobian(
+    model: FitModel, z: np.ndarray, levels: np.ndarray, dlevels: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every parameter's value in its unit, then each trace's friction ratio ON/OFF;
+    and their Jacobian in ``z``, from the levels and their derivatives that the last
+    linearisation of the fit computed (so no further program to compile)."""
+    specs = model.specs
+    p, m, k = len(specs), model.data.n_traces, len(model.physical_names)
+    vals, jac = np.empty(p + m), np.zeros((p + m, p))
+    for i, spec in enumerate(specs):
+        vals[i], jac[i, i] = float(spec.value(z[i])), spec.slope(z[i])
+    off, on = levels[:m], levels[m:]
+    vals[p:] = on / off
+    jac[p:, :k] = (dlevels[m:] * off[:, None] - on[:, None] * dlevels[:m]) / off[:, None] ** 2
+    return vals, jac
+
+
 def _summarise(
     model: FitModel, best: LMResult, phi: float, optima: list[dict], count: dict[str, int]
 ) -> FitResult:
     data = model.data
     z = np.asarray(best.z)
-    zj = best.z
-    w = np.asarray(solvers(model).residuals(zj, phi))
+    w = np.asarray(best.residuals)
     n, p = w.size, z.size
     rss = float(w @ w)
     sigma2 = rss / (n - p)
@@ -342,7 +349,7 @@ def _summarise(
     corr = cov / np.outer(se_safe, se_safe)
 
     # delta method for the physical values (and the per-trace friction ratios)
-    vals, dvals = (np.asarray(x) for x in solvers(model).values(zj))
+    vals, dvals = _values_and_jacobian(model, z, *(np.asarray(x) for x in best.aux))
     se_vals = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", dvals, cov, dvals), 0.0))
 
     warnings: list[str] = []
@@ -409,7 +416,6 @@ def _summarise(
         optima=optima,
         warnings=warnings,
         lm_steps=count["steps"],
-        residual_evaluations=count["residuals"],
         jacobian_evaluations=count["jacobians"],
     )
 

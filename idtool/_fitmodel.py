@@ -69,6 +69,14 @@ class ParamSpec:
             return jnp.exp(a + (b - a) * jax.nn.sigmoid(z))
         return self.centre + self.scale * z
 
+    def slope(self, z: float) -> float:
+        """``d value / d z`` at ``z`` (for the delta method)."""
+        if self.bounded:
+            a, b = np.log(self.lo), np.log(self.hi)
+            s = 1.0 / (1.0 + np.exp(-z))
+            return float(self.value(z)) * (b - a) * s * (1.0 - s)
+        return self.scale
+
     def internal(self, value: float) -> float:
         if self.bounded:
             a, b = np.log(self.lo), np.log(self.hi)
@@ -272,8 +280,9 @@ class FitModel:
 
     def normal_equations(
         self, z: Float[Array, " p"], phi: float | Array
-    ) -> tuple[Array, Array, Array]:
-        """Whitened residuals ``r``, ``J^T J`` and ``J^T r`` at ``z``.
+    ) -> tuple[Array, Array, Array, tuple[Array, Array]]:
+        """Whitened residuals ``r``, ``J^T J`` and ``J^T r`` at ``z``; and the levels
+        ``(OFF, ON)`` [N] (2 n_traces) with their Jacobian in the physical parameters.
 
         The physical parameters reach the traces only through the per-trace OFF and ON
         levels, so the Jacobian is taken in the bench model's inputs ``u = (OFF, ON,
@@ -294,14 +303,14 @@ class FitModel:
             e = self.predict_at_levels(zz, u[:m], u[m : 2 * m]) - self.data.force_n
             return self._whiten(e, phi)
 
-        dlv = jax.jacfwd(levels)(z[:k])  # (2 m, k)
-        u = jnp.concatenate([levels(z[:k]), z[k:]])
+        lv, dlv = levels(z[:k]), jax.jacfwd(levels)(z[:k])  # (2 m,), (2 m, k)
+        u = jnp.concatenate([lv, z[k:]])
         r, jtj_u, jtr_u = normal_equations(resid, u, self.level_structure)
         n_rest = z.size - k
         t = jnp.block(
             [[dlv, jnp.zeros((2 * m, n_rest))], [jnp.zeros((n_rest, k)), jnp.eye(n_rest)]]
         )
-        return r, t.T @ jtj_u @ t, t.T @ jtr_u
+        return r, t.T @ jtj_u @ t, t.T @ jtr_u, (lv, dlv)
 
     def residuals(self, z: Float[Array, " p"], phi: float | Array = 0.0) -> Array:
         """AR(1)-whitened residuals: ``e_t - phi e_{t-1}`` within each trace, and

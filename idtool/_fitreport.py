@@ -96,7 +96,6 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
         ],
         "warnings": r.warnings,
         "lm_steps": r.lm_steps,
-        "residual_evaluations": r.residual_evaluations,
         "jacobian_evaluations": r.jacobian_evaluations,
         "dataset": {"name": d.name, "sha256": d.sha256, "path": dataset_path},
         "idtool_version": __version__,

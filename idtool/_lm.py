@@ -107,18 +107,21 @@ def normal_equations(
 class LMResult(eqx.Module):
     """Outcome of :func:`levenberg_marquardt`.
 
-    ``jtj`` and ``jtr`` are the normal equations at ``z`` (masked parameters included),
-    ready for a Gauss-Newton covariance. ``n_jacobians`` counts coloured Jacobians (each
-    ``c`` JVPs), ``n_residuals`` plain residual evaluations.
+    ``residuals`` are ``fn(z, args)``; ``aux`` what ``equations`` returned beside the
+    normal equations at ``z`` (``()`` without it); ``jtj`` and ``jtr`` the normal equations at
+    ``z`` (masked parameters included), ready for a Gauss-Newton covariance.
+    ``steps`` counts trial steps (accepted or not), ``n_jacobians`` linearisations
+    (each the residuals and one JVP per colour): the start point and every trial.
     """
 
     z: Float[Array, " p"]
     loss: Float[Array, ""]
+    residuals: Float[Array, " n"]
+    aux: Any
     jtj: Float[Array, "p p"]
     jtr: Float[Array, " p"]
     steps: Int[Array, ""]
     n_jacobians: Int[Array, ""]
-    n_residuals: Int[Array, ""]
     converged: Bool[Array, ""]
 
 
@@ -140,7 +143,7 @@ def levenberg_marquardt(
     max_steps: int | Array = 100,
     tol: float = 1e-8,
     max_step: float = 5.0,
-    equations: Callable[[Array, Any], tuple[Array, Array, Array]] | None = None,
+    equations: Callable[[Array, Any], tuple[Array, Array, Array, Any]] | None = None,
 ) -> LMResult:
     """Minimise ``0.5 |fn(z, args)|^2`` over the parameters in ``mask``.
 
@@ -153,105 +156,114 @@ def levenberg_marquardt(
 
     No step moves a parameter by more than ``max_step`` on the internal scale.
 
-    ``equations(z, args) -> (r, J^T J, J^T r)``, if given, replaces the coloured
-    :func:`normal_equations` of ``structure`` (for a cheaper Jacobian of a subset).
+    ``equations(z, args) -> (r, J^T J, J^T r, aux)``, if given, replaces the coloured
+    :func:`normal_equations` of ``structure``; ``aux`` (any pytree it computes on the
+    way) is returned for the final ``z``.
     """
     z0 = jnp.asarray(z0, float)
-
-    def resid(z):
-        return fn(z, args)
+    p = z0.size
 
     def linearise(z):
         if equations is None:
-            r, jtj, jtr = normal_equations(resid, z, structure)
+            r, jtj, jtr = normal_equations(lambda y: fn(y, args), z, structure)
+            aux = ()
         else:
-            r, jtj, jtr = equations(z, args)
-        a, g = _masked(jtj, jtr, mask)
-        return r, jtj, jtr, a, g
+            r, jtj, jtr, aux = equations(z, args)
+        return (r, jtj, jtr, *_masked(jtj, jtr, mask), aux)
 
-    def decrement(a, g, loss, n):
+    def converged(a, g, loss, n):
         # Jitter keeps a rank-deficient J^T J solvable; it only affects flat directions.
-        jitter = 1e-12 * jnp.max(jnp.diag(a)) * jnp.eye(a.shape[0])
+        jitter = 1e-12 * jnp.max(jnp.diag(a)) * jnp.eye(p)
         gn = jnp.linalg.solve(a + jitter, g)
         return jnp.dot(g, gn) <= tol * 2.0 * loss / n
 
-    r, jtj, jtr, a, g = linearise(z0)
-    n = r.size
-    loss = 0.5 * jnp.dot(r, r)
+    # Every iteration linearises at the trial point, whether or not it is then accepted:
+    # the model appears once in the compiled loop (compile time is most of the time to a
+    # first fit), at the price of a wasted Jacobian per rejected step (about 1 in 10).
+    shapes = jax.eval_shape(linearise, z0)
+    n = shapes[0].shape[0]
     state = dict(
+        aux=jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), shapes[-1]),
         z=z0,
-        loss=loss,
-        jtj=jtj,
-        jtr=jtr,
-        a=a,
-        g=g,
+        loss=jnp.asarray(jnp.inf),
+        r=jnp.zeros(n),
+        jtj=jnp.zeros((p, p)),
+        jtr=jnp.zeros(p),
+        a=jnp.eye(p),
+        g=jnp.zeros(p),
+        trial=z0,
+        predicted=jnp.asarray(1.0),
+        first=jnp.asarray(True),
         damping=jnp.asarray(1e-3),  # relative to each curvature (Moré scaling below)
-        scale=jnp.diag(a),
         nu=jnp.asarray(2.0),
+        scale=jnp.zeros(p),
         steps=jnp.asarray(0),
-        n_jac=jnp.asarray(1),
-        n_res=jnp.asarray(0),
-        done=decrement(a, g, loss, n),
+        n_jac=jnp.asarray(0),
+        done=jnp.asarray(False),
         failed=jnp.asarray(False),
     )
 
     def cond(s):
-        return ~s["done"] & ~s["failed"] & (s["steps"] < max_steps)
+        return s["first"] | (~s["done"] & ~s["failed"] & (s["steps"] < max_steps))
 
     def body(s):
-        # Moré's scaling: damp each parameter in proportion to the largest curvature
-        # it has shown so far. A running maximum, so that a direction that turns flat
-        # (a bounded parameter saturating) cannot take an unbounded step.
-        scale = jnp.maximum(s["scale"], jnp.diag(s["a"]))
+        r, jtj, jtr, a, g, aux = linearise(s["trial"])
+        loss_new = 0.5 * jnp.dot(r, r)
+        gain = (s["loss"] - loss_new) / jnp.maximum(s["predicted"], 1e-300)
+        accept = s["first"] | (jnp.isfinite(loss_new) & (gain > 0.0))
+
+        def pick(new, old):
+            return jnp.where(accept, new, old)
+
+        z, loss, r = pick(s["trial"], s["z"]), pick(loss_new, s["loss"]), pick(r, s["r"])
+        jtj, jtr, a, g = pick(jtj, s["jtj"]), pick(jtr, s["jtr"]), pick(a, s["a"]), pick(g, s["g"])
+        aux = jax.tree.map(pick, aux, s["aux"])
+        shrink = jnp.where(s["first"], 1.0, jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3))
+        damping = jnp.where(accept, s["damping"] * shrink, s["damping"] * s["nu"])
+        nu = jnp.where(accept, 2.0, 2.0 * s["nu"])
+
+        # The next trial step. Moré's scaling: damp each parameter in proportion to
+        # the largest curvature it has shown so far. A running maximum, so that a
+        # direction that turns flat (a bounded parameter saturating) cannot take an
+        # unbounded step.
+        scale = jnp.maximum(s["scale"], jnp.diag(a))
         scale = jnp.maximum(scale, 1e-12 * jnp.max(scale))
-        h = jnp.linalg.solve(s["a"] + s["damping"] * jnp.diag(scale), -s["g"])
+        h = jnp.linalg.solve(a + damping * jnp.diag(scale), -g)
         h = jnp.where(mask, h, 0.0)
         # The internal scale is of order one (a bounded parameter spans its range
         # within |z| < 10): a longer step only happens along a direction gone flat,
         # which the damping cannot hold, so it is cut back.
         h = h * jnp.minimum(1.0, max_step / jnp.maximum(jnp.max(jnp.abs(h)), 1e-300))
-        z_new = s["z"] + h
-        r_new = resid(z_new)
-        loss_new = 0.5 * jnp.dot(r_new, r_new)
-        predicted = -jnp.dot(s["g"], h) - 0.5 * jnp.dot(h, s["a"] @ h)
-        gain = (s["loss"] - loss_new) / jnp.maximum(predicted, 1e-300)
-        accept = jnp.isfinite(loss_new) & (gain > 0.0)
-
-        def accepted(s):
-            _, jtj, jtr, a, g = linearise(z_new)
-            shrink = jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
-            return s | dict(
-                z=z_new,
-                loss=loss_new,
-                jtj=jtj,
-                jtr=jtr,
-                a=a,
-                g=g,
-                damping=s["damping"] * shrink,
-                nu=jnp.asarray(2.0),
-                n_jac=s["n_jac"] + 1,
-                done=decrement(a, g, loss_new, n),
-            )
-
-        def rejected(s):
-            return s | dict(damping=s["damping"] * s["nu"], nu=2.0 * s["nu"])
-
-        s = jax.lax.cond(accept, accepted, rejected, s)
-        return s | dict(
+        return dict(
+            aux=aux,
+            z=z,
+            loss=loss,
+            r=r,
+            jtj=jtj,
+            jtr=jtr,
+            a=a,
+            g=g,
+            trial=z + h,
+            predicted=-jnp.dot(g, h) - 0.5 * jnp.dot(h, a @ h),
+            first=jnp.asarray(False),
+            damping=damping,
+            nu=nu,
             scale=scale,
-            steps=s["steps"] + 1,
-            n_res=s["n_res"] + 1,
-            failed=~(s["damping"] < 1e30),
+            steps=s["steps"] + jnp.where(s["first"], 0, 1),
+            n_jac=s["n_jac"] + 1,
+            done=accept & converged(a, g, loss, r.size),
+            failed=~(damping < 1e30),
         )
 
     s = jax.lax.while_loop(cond, body, state)
     return LMResult(
         z=s["z"],
         loss=s["loss"],
+        residuals=s["r"],
+        aux=s["aux"],
         jtj=s["jtj"],
         jtr=s["jtr"],
         steps=s["steps"],
         n_jacobians=s["n_jac"],
-        n_residuals=s["n_res"],
         converged=s["done"],
     )

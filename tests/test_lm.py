@@ -66,11 +66,26 @@ def test_normal_equations_equal_the_dense_jacobians_for_the_bench_model():
     np.testing.assert_allclose(jtr, jac.T @ fn(z), rtol=1e-9, atol=1e-9 * np.max(np.abs(jtr)))
     assert model.jacobian_structure.seeds.shape[0] == model.n_shared + 4  # 10, not 102
     # What the fit uses: the chain rule through the per-trace levels (8 JVPs).
-    r2, jtj2, jtr2 = jax.jit(model.normal_equations)(z, 0.5)
+    r2, jtj2, jtr2, (levels, dlevels) = jax.jit(model.normal_equations)(z, 0.5)
     np.testing.assert_allclose(r2, fn(z), rtol=1e-12, atol=1e-10)
     assert np.max(np.abs(jtj2 - jac.T @ jac) / scale) < 1e-9
     np.testing.assert_allclose(jtr2, jac.T @ fn(z), rtol=1e-8, atol=1e-9 * np.max(np.abs(jtr)))
     assert model.level_structure.seeds.shape[0] == 8
+    # ... and the levels it hands the delta method, with their derivatives.
+    k, m = len(model.physical_names), data.n_traces
+    off, on, _ = model.levels(model.values(z))
+    np.testing.assert_allclose(levels, np.concatenate([off, on]), rtol=1e-14)
+
+    def lv(zp):
+        off, on, _ = model.levels(model.values(z.at[:k].set(zp)))
+        return jnp.concatenate([off, on])
+
+    h = 1e-6
+    fd = np.stack(
+        [(lv(z[:k].at[j].add(h)) - lv(z[:k].at[j].add(-h))) / (2 * h) for j in range(k)], 1
+    )
+    np.testing.assert_allclose(dlevels, fd, rtol=1e-6, atol=1e-7 * np.max(np.abs(fd)))
+    assert dlevels.shape == (2 * m, k)
 
 
 def test_lm_matches_scipy_least_squares():
