@@ -33,9 +33,11 @@ Timed, each in a fresh interpreter (wall time of the subprocess: interpreter sta
 imports and JIT compilation all count):
 
 1. end to end: idtool ``import idtool`` + load + ``fit_start`` + ``fit_model``, against
-   the SciPy replica of ``fit_model``. The SciPy process reads the prepared arrays and
-   the quasi-random start points from an .npz written by this script, so loading the parquet
-   traces and preparing the blocks (idtool's own NumPy code) is not charged to SciPy.
+   the SciPy replica of ``fit_model`` (and idtool once more with XLA's persistent
+   compilation cache filled by an earlier run, as ``idtool fit`` keeps it). The SciPy
+   process reads the prepared arrays and the quasi-random start points from an .npz
+   written by this script, so loading the parquet traces and preparing the blocks
+   (idtool's own NumPy code) is not charged to SciPy.
 2. the matched polish alone: all (102) parameters from idtool's multi-start optimum (the
    nuisances at their start values, where ``fit_model`` starts its polish) with phi
    fixed at idtool's final value; idtool runs its own compiled Levenberg-Marquardt
@@ -102,6 +104,11 @@ FR_TOLERANCE = 3e-5
 
 # --------------------------------------------------------------------------- idtool side
 # Each runs as ``python -c CODE OUT.json [IN.json]`` in a fresh interpreter.
+CACHE_ON = """
+import jax
+jax.config.update("jax_compilation_cache_dir", "{cache}")
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.05)
+"""
 IDTOOL_FULL = """
 import json, sys
 import idtool
@@ -523,6 +530,12 @@ def main(repeat: int = 1) -> None:
     )
     phi = float(full["phi"])
     z_start = np.array(full["z_start"])
+    # the same with XLA's persistent compilation cache (what `idtool fit` keeps in
+    # ~/.cache/idtool/jax): filled by one run, then timed
+    print("idtool fit_model, end to end with a warm compilation cache ...", flush=True)
+    cached = ["-c", CACHE_ON.format(cache=tmp / "xla_cache") + IDTOOL_FULL.format(ppb=ppb)]
+    run_subprocess([*cached, str(full_json)], full_json, 1)
+    wall_cached, _ = run_subprocess([*cached, str(full_json)], full_json, repeat)
 
     # in-process: warm fit_model, residual and Jacobian costs, problem arrays, cross-checks
     print("idtool in-process: warm fit_model, costs, cross-checks ...", flush=True)
@@ -720,6 +733,7 @@ def main(repeat: int = 1) -> None:
     rows = [
         (f"end to end: SciPy fit_model replica ({n_sp} evals)", wall_sp, wall_sp),
         (f"end to end: idtool fit_model ({full['lm_steps']} LM steps)", wall_full, wall_sp),
+        ("end to end: the same, compilation cache warm", wall_cached, wall_sp),
         (f"matched polish: SciPy least_squares ({n_spp} evals)", wall_spp, wall_spp),
         (f"matched polish: idtool LM ({pol['lm_steps']} steps)", wall_pol, wall_spp),
         ("in-process: SciPy fit_model replica, fit only", sp_warm, sp_warm),
