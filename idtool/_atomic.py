@@ -11,7 +11,14 @@ from pathlib import Path
 
 from ._errors import IdtoolError
 
-__all__ = ["atomic_output_dir"]
+__all__ = ["atomic_output_dir", "refuse_existing"]
+
+
+def refuse_existing(out: str | os.PathLike[str], force: bool) -> None:
+    """Stop with a clear message if ``out`` exists and ``force`` is off: commands call
+    it before their work, so a refusal does not come after minutes of fitting."""
+    if Path(out).exists() and not force:
+        raise IdtoolError(f"{out} already exists; pass --force to replace it")
 
 
 @contextlib.contextmanager
@@ -23,8 +30,7 @@ def atomic_output_dir(out: str | os.PathLike[str], *, force: bool = False) -> It
     left as it was. An existing ``out`` is replaced only with ``force=True``.
     """
     out = Path(out)
-    if out.exists() and not force:
-        raise IdtoolError(f"{out} already exists; pass --force to replace it")
+    refuse_existing(out, force)
     if out.exists() and not out.is_dir():
         raise IdtoolError(f"{out} exists and is not a folder; choose another --out")
     out.parent.mkdir(parents=True, exist_ok=True)

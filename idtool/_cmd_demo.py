@@ -10,7 +10,7 @@ import argparse
 import time
 from pathlib import Path
 
-from ._errors import IdtoolError
+from ._atomic import refuse_existing
 
 __all__ = ["register"]
 
@@ -20,8 +20,7 @@ def _run(args: argparse.Namespace) -> int:
     from ._example import example_dataset_path
 
     out = Path(args.out)
-    if out.exists() and not args.force:
-        raise IdtoolError(f"{out} already exists; pass --force to replace it")
+    refuse_existing(out, args.force)
     data = str(example_dataset_path())
     seed = str(args.seed)
     steps = [

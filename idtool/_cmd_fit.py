@@ -7,7 +7,7 @@ import json
 import time
 from pathlib import Path
 
-from ._atomic import atomic_output_dir
+from ._atomic import atomic_output_dir, refuse_existing
 from ._errors import IdtoolError
 
 __all__ = ["register"]
@@ -21,8 +21,7 @@ def _run(args: argparse.Namespace) -> int:
 
     started = time.perf_counter()
     out = Path(args.out)
-    if out.exists() and not args.force:  # fail before the work, not after it
-        raise IdtoolError(f"{out} already exists; pass --force to replace it")
+    refuse_existing(out, args.force)
     if args.starts < 1:
         raise IdtoolError(f"--starts {args.starts}: give at least 1")
     dataset = load_dataset(args.dataset)

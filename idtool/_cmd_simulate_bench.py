@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
+from ._atomic import refuse_existing
 from ._errors import IdtoolError
 from ._sim_params import load_bench_params
 from ._simulate import TRUTH_FILE, simulate_bench, write_simulation
@@ -13,8 +13,7 @@ __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
-    if Path(args.out).exists() and not args.force:  # fail before the work, not after
-        raise IdtoolError(f"{args.out} already exists; pass --force to replace it")
+    refuse_existing(args.out, args.force)
     params = load_bench_params(args.params)
     dataset, truth = simulate_bench(params, args.seed)
     try:

@@ -26,6 +26,13 @@ def _plt():
     return plt
 
 
+def _save(plt, fig, path: Path, dpi: int = 90) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return path
+
+
 def correlation_figure(names: list[str], matrix: np.ndarray, path: Path) -> Path:
     """Heat map of the fit's correlation matrix, values written in the cells."""
     plt = _plt()
@@ -38,10 +45,7 @@ def correlation_figure(names: list[str], matrix: np.ndarray, path: Path) -> Path
         for j in range(n):
             ax.text(j, i, f"{matrix[i, j]:+.2f}", ha="center", va="center", fontsize=7)
     fig.colorbar(im, ax=ax, shrink=0.8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path)
 
 
 def corner_figure(values: dict[str, np.ndarray], names: list[str], path: Path) -> Path:
@@ -67,10 +71,7 @@ def corner_figure(values: dict[str, np.ndarray], names: list[str], path: Path) -
             if j == 0 and i > 0:
                 ax.set_ylabel(yi, fontsize=8)
             ax.tick_params(labelsize=6)
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path, dpi=80)
 
 
 def walker_figure(chains: dict[str, np.ndarray], names: list[str], path: Path) -> Path:
@@ -82,10 +83,7 @@ def walker_figure(chains: dict[str, np.ndarray], names: list[str], path: Path) -
         ax.set_ylabel(name, fontsize=8)
         ax.tick_params(labelsize=7)
     np.atleast_1d(axes)[-1].set_xlabel("step (after burn-in)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path, dpi=80)
 
 
 def friction_ratio_figures(
@@ -118,31 +116,40 @@ def friction_ratio_figures(
             zorder=3,
         )
 
-    fig, ax = plt.subplots(figsize=(6, 4))
-    for c, load in enumerate(loads):
-        med, lo, hi = band([load], amp_grid)
-        ax.fill_between(amp_grid, lo, hi, color=f"C{c}", alpha=0.25)
-        ax.plot(amp_grid, med, color=f"C{c}", label=f"{load:g} N")
-        marks(ax, "normal_load_n", load, "amplitude_fraction")
-    ax.set(xlabel="commanded amplitude fraction", ylabel="friction ratio FR", ylim=(0, 1.05))
-    ax.legend(title="normal load")
-    fig.tight_layout()
-    p1 = out / "fr_vs_amplitude.png"
-    fig.savefig(p1, dpi=90)
-    plt.close(fig)
+    def panel(groups, x_grid, curve, key, x_key, label, xlabel, title, path):
+        # One curve and band per group (a load, or an amplitude) against x_grid.
+        fig, ax = plt.subplots(figsize=(6, 4))
+        for c, value in enumerate(groups):
+            med, lo, hi = curve(value)
+            ax.fill_between(x_grid, lo, hi, color=f"C{c}", alpha=0.25)
+            ax.plot(x_grid, med, color=f"C{c}", label=label(value))
+            marks(ax, key, value, x_key)
+        ax.set(xlabel=xlabel, ylabel="friction ratio FR", ylim=(0, 1.05))
+        ax.legend(title=title)
+        return _save(plt, fig, path)
 
-    fig, ax = plt.subplots(figsize=(6, 4))
-    for c, alpha in enumerate(alphas):
-        med, lo, hi = band(load_grid, [alpha])
-        ax.fill_between(load_grid, lo, hi, color=f"C{c}", alpha=0.25)
-        ax.plot(load_grid, med, color=f"C{c}", label=f"{100 * alpha:.0f}%")
-        marks(ax, "amplitude_fraction", alpha, "normal_load_n")
-    ax.set(xlabel="normal load [N]", ylabel="friction ratio FR", ylim=(0, 1.05))
-    ax.legend(title="amplitude")
-    fig.tight_layout()
-    p2 = out / "fr_vs_load.png"
-    fig.savefig(p2, dpi=90)
-    plt.close(fig)
+    p1 = panel(
+        loads,
+        amp_grid,
+        lambda load: band([load], amp_grid),
+        "normal_load_n",
+        "amplitude_fraction",
+        lambda load: f"{load:g} N",
+        "commanded amplitude fraction",
+        "normal load",
+        out / "fr_vs_amplitude.png",
+    )
+    p2 = panel(
+        alphas,
+        load_grid,
+        lambda alpha: band(load_grid, [alpha]),
+        "amplitude_fraction",
+        "normal_load_n",
+        lambda alpha: f"{100 * alpha:.0f}%",
+        "normal load [N]",
+        "amplitude",
+        out / "fr_vs_load.png",
+    )
     return p1, p2
 
 
@@ -166,7 +173,4 @@ def amplitude_map_figure(
     ax.axhline(1.0, color="k", lw=0.8, ls="--")
     ax.set(xlabel="normal load [N]", ylabel="amplitude fraction needed", ylim=(0, 1.1))
     ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path, rows
+    return _save(plt, fig, path), rows
