@@ -2,7 +2,8 @@
 
 Model choice (issue: coupling laws always when ``coupling="auto"``, friction laws on
 request): every candidate is fitted by :func:`idtool._fit.fit_model` and ranked by BIC
-(AIC reported too). BIC decides because the candidates are nested and the data are
+(AIC reported too); the chosen fit's intervals are then checked against the likelihood
+(:mod:`idtool._intervals`). BIC decides because the candidates are nested and the data are
 many (thousands of blocks): AIC's penalty of 2 per parameter would let the richer law
 win on noise. With a single normal load the power limit cannot show, so ``auto`` keeps
 the constant coupling and says so.
@@ -16,8 +17,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._dataset import Dataset
-from ._fit import FitResult, fit_model, fit_start, solvers
+from ._fit import FitResult, fit_model, fit_start
 from ._fitdata import FitData
+from ._intervals import check_intervals, refit_with_fixed
 
 __all__ = ["FitRun", "Profile", "fit_dataset", "profile_parameter"]
 
@@ -76,6 +78,7 @@ def fit_dataset(
     }
     ranked = sorted(candidates.items(), key=lambda kv: kv[1].bic)
     best_key, best = ranked[0]
+    best = candidates[best_key] = check_intervals(best)
     if len(ranked) == 1:
         reason = f"{best_key} as requested"
         if coupling == "auto" and single_load:
@@ -103,22 +106,17 @@ def profile_parameter(result: FitResult, name: str, n_points: int = 9) -> Profil
     the rise of -2 log L (``(RSS - RSS_min) / sigma^2``) stays below 3.84.
     """
     model = result.model
-    lm = solvers(model).lm
     i = model.names.index(name)
     se = float(np.sqrt(result.cov_z[i, i]))
     grid = result.z[i] + se * np.linspace(-3.0, 3.0, n_points)
-    mask = jnp.ones(result.z.size, bool).at[i].set(False)
-    sigma2 = result.rss / (result.n_data - result.z.size)
     delta = np.empty(n_points)
     mid = n_points // 2
     # Walk outward from the optimum in both directions, each refit starting from its
     # neighbour's solution: a handful of LM steps per point instead of a cold start.
     for order in (range(mid, n_points), range(mid, -1, -1)):
-        z = jnp.asarray(result.z)
+        z = None
         for j in order:
-            out = lm(z.at[i].set(grid[j]), mask, result.phi, 100)
-            z, rss = out.z, 2.0 * float(out.loss)
-            delta[j] = (rss - result.rss) / sigma2
+            delta[j], z = refit_with_fixed(result, i, grid[j], z)
     values = [float(model.specs[i].value(jnp.asarray(zi))) for zi in grid]
     v, d = np.array(values), delta
     return Profile(name, v, d, _interval(v, d))

@@ -105,8 +105,9 @@ def _polish(theta: np.ndarray, target: Target) -> tuple[np.ndarray, float]:
 
 def _other_optima(fit: Any) -> list[tuple[str, np.ndarray]]:
     """The physical block (internal) of the fit's other multi-start optima whose
-    residual sum of squares is within ``RSS_FACTOR`` of the best one's (the multi-start
-    ranks basins with the nuisances at their start values, so close ones can swap)."""
+    residual sum of squares is within ``RSS_FACTOR`` of the best one's: a fit stopped
+    short (a step budget, a stored fit from an older run) may sit in a local optimum,
+    and the posterior's main mode is then reached from one of those."""
     model = fit.model
     specs = model.specs[: len(model.physical_names)]
     if hasattr(fit, "optima"):  # FitResult

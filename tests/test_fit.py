@@ -51,6 +51,7 @@ def test_example_dataset_recovers_its_truth(example_run):
     assert_recovered(example_run, truth_of(example_params()))
     for w in example_run.chosen.warnings:  # correlations may be flagged; nothing worse
         assert "bound" not in w and "cannot inform" not in w and "stopped" not in w, w
+        assert "too narrow" not in w, w
 
 
 def test_example_fit_friction_ratios_match_the_simulator(example_run):
@@ -76,18 +77,24 @@ def test_short_on_windows_that_never_reach_the_on_level():
     dataset, truth = idtool.simulate_bench(params, seed=7)
     reached = [t.reaches_on_level for t in truth.traces]
     assert not all(reached)  # the point of the test: several ON levels are never seen
-    assert_recovered(fit_dataset(dataset, seed=1), truth_of(params))
+    run = fit_dataset(dataset, seed=1)
+    assert_recovered(run, truth_of(params))
+    # With two loads and short windows Kt is barely identified: its Gauss-Newton
+    # interval ([1.4e8, 7.3e8] here, missing the truth) is far too narrow, the
+    # likelihood check sees it and reports the profile interval instead.
+    assert any(w.startswith("Kt: the Gauss-Newton 95% interval") for w in run.chosen.warnings)
 
 
 def test_a_spurious_multistart_basin_does_not_win():
-    """Seed 0 of the small two-load design (tests/sample_helpers.py): ranked with the
-    nuisances at their start values, a low-Kt basin (~1e8 N/m) edges out the true one,
-    and polishing only it stopped there (RSS 94.8 against 91.5). fit_model polishes
-    the close distinct optima jointly and keeps the lowest."""
-    dataset, _ = idtool.simulate_bench(small_params(), seed=0)
-    run = fit_dataset(dataset, seed=0)
-    assert len(run.chosen.optima) >= 2
-    assert_recovered(run, {k: v for k, v in small_truth().items() if k in PHYSICAL})
+    """Small two-load designs (tests/sample_helpers.py) have a second basin at Kt ~ 8e7
+    whose loss is close to the true one's (RSS 94.8 against 91.5 for seed 0). Ranked
+    with the nuisances held at their start values it came first on several seeds; the
+    joint multi-start finds the true basin (10 of 10 seeds when measured)."""
+    for seed in (0, 3):
+        dataset, _ = idtool.simulate_bench(small_params(), seed=seed)
+        run = fit_dataset(dataset, seed=0)
+        assert len(run.chosen.optima) >= 2
+        assert_recovered(run, {k: v for k, v in small_truth().items() if k in PHYSICAL})
 
 
 def test_single_load_warns_that_the_coupling_cannot_be_told_apart():
@@ -231,3 +238,25 @@ def test_lugre_fit_runs_and_ranks_against_dahl():
     assert {"static_ratio", "stribeck_velocity_m_s"} <= set(lugre.model.physical_names)
     # The data come from Dahl: LuGre's two extra parameters cannot win by BIC.
     assert run.chosen.model.law == "dahl"
+
+
+def test_multistart_points_are_seeded_and_evenly_spread():
+    from scipy.stats import qmc
+
+    from idtool._fit import quasi_random
+
+    a, b = quasi_random(64, 4, seed=1), quasi_random(64, 4, seed=1)
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, quasi_random(64, 4, seed=2))
+    assert a.shape == (64, 4) and np.all((a >= 0.0) & (a < 1.0))
+    # Every coordinate covers [0, 1) evenly: the largest gap (around the circle) stays
+    # below 3/n (measured 1.9/n; 64 uniform random points leave about 5/n).
+    for column in a.T:
+        ring = np.sort(column)
+        gaps = np.diff(np.concatenate([ring, ring[:1] + 1.0]))
+        assert gaps.max() < 3.0 / 64
+    # Quasi-random: the centred L2 discrepancy is far below that of random points
+    # (measured 0.003 against 0.018 on average).
+    rng = np.random.default_rng(0)
+    random = np.mean([qmc.discrepancy(rng.random((64, 4))) for _ in range(20)])
+    assert qmc.discrepancy(a) < 0.5 * random

@@ -2,6 +2,7 @@
 reproducibility, checkpoints, the marginal likelihood, priors and diagnostics."""
 
 import copy
+import dataclasses
 import json
 
 import jax
@@ -131,13 +132,17 @@ def test_held_out_load_prediction_is_within_0_03_and_inside_the_band(coverage_ru
 
 
 def test_walkers_leave_a_local_optimum_of_the_fit(monkeypatch):
-    """Polishing only the best multi-start optimum (as fit_model did before it polished
-    several), seed 0's fit stops in a local optimum (Kt ~ 1e8): the mode search finds
-    the posterior's main mode from another multi-start optimum and says so."""
-    monkeypatch.setattr(idtool._fit, "_POLISHED_OPTIMA", 1)
+    """A fit stopped in a local optimum (started only at Kt = 8e7 it stays at Kt ~ 8.4e7,
+    RSS 94.8 against 91.5), its multi-start summary also listing the main mode's
+    optimum: the sampler's mode search moves the walkers there and says so.
+    (fit_model's own multi-start finds the main mode: tests/test_fit.py.)"""
     dataset, _ = idtool.simulate_bench(small_params(), seed=0)
-    fit = fit_dataset(dataset, seed=0).chosen
-    assert fit.estimates["Kt"].estimate < 3e8  # the set-up: a local optimum
+    good = fit_dataset(dataset, seed=0).chosen
+    start = {"Kt": 8e7, "coupling_gain": 0.03, "power_load_n": 125.0}
+    monkeypatch.setattr(idtool._fit, "_start_point", lambda model, u: dict(start))
+    local = fit_dataset(dataset, seed=0, n_starts=1).chosen
+    assert local.estimates["Kt"].estimate < 3e8  # the set-up: a local optimum
+    fit = dataclasses.replace(local, optima=[*local.optima, *good.optima])
     post = sample_posterior(fit, walkers=WALKERS, steps=100, seed=0)
     assert "local optimum" in post.warnings[0]
     assert np.median(post.draws()["Kt"]) == pytest.approx(truth()["Kt"], rel=0.1)
