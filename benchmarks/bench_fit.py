@@ -53,9 +53,10 @@ if the two phi differ by more than 0.01, or if the bench loop or the contact sol
 disagree with idtool's (1e-9 N; 3e-5 in FR: idtool's 256-step cycle average is itself
 ~1.5e-5 off at these Lambda, LSODA ~1e-9).
 
-Run: ``.venv/bin/python benchmarks/bench_fit.py [--repeat N]`` (about 3 minutes on a quiet
-2-CPU machine, 1.5 more per extra repeat). Other load on the machine slows JAX's
-multi-threaded runtime far more than SciPy's single thread; every timing row shows how
+Run: ``.venv/bin/python benchmarks/bench_fit.py [--repeat N]`` (about 5 minutes on a
+quiet 2-CPU machine, 4.5 more per extra repeat: the SciPy replica takes 4 of them).
+Other load on the machine slows JAX's multi-threaded runtime far more than SciPy's
+single thread; every timing row shows how
 many CPUs other processes kept busy meanwhile, and ``--repeat`` keeps the fastest of N
 fresh interpreters.
 """

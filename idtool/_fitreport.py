@@ -166,11 +166,14 @@ def fit_report(run: FitRun) -> str:
             f"    {op[0]:6.0f} N, {100 * op[1]:3.0f}%, {op[2]:.3g} m/s   FR = "
             f"{r.friction_ratio[i]:.4f} +/- {r.friction_ratio_se[i]:.4f}"
         )
-    lines.append("[[Multi-start]]")
+    lines.append(
+        "[[Multi-start]]  (each start a short joint fit, RSS at phi = 0; the lowest is then "
+        "taken to convergence)"
+    )
     for o in r.optima:
         lines.append(
             f"    RSS {o['rss']:14.6g}  found {o['count']}x  "
-            f"{'converged' if o['converged'] else 'not converged'}"
+            f"{'converged' if o['converged'] else 'step budget reached'}"
         )
     lines.append("[[Warnings]]")
     lines += [f"    - {w}" for w in r.warnings] or ["    none"]
