@@ -39,7 +39,7 @@ imports and JIT compilation all count):
 2. the matched polish alone: all (102) parameters from idtool's multi-start optimum (the
    nuisances at their start values, where ``fit_model`` starts its polish) with phi
    fixed at idtool's final value; idtool runs its own compiled Levenberg-Marquardt
-   (``idtool._fit.solvers``), SciPy ``least_squares`` as above.
+   (``idtool._fit.compiled_lm``), SciPy ``least_squares`` as above.
 
 In-process it also measures idtool's warm ``fit_model`` (a second call on the same
 data: its compiled programs are reused), the cost of one jitted residual evaluation, of
@@ -128,13 +128,13 @@ IDTOOL_POLISH = """
 import json, sys
 import jax.numpy as jnp
 import idtool
-from idtool._fit import fit_start, model_for, solvers
+from idtool._fit import compiled_lm, fit_start, model_for
 
 job = json.load(open(sys.argv[2]))
 data = fit_start(idtool.load_dataset(idtool.example_dataset_path()), periods_per_block={ppb})
 model = model_for(data, "dahl", "power-limited")
 z0 = jnp.asarray(job["z_start"])
-out = solvers(model).lm(z0, jnp.ones(z0.size, bool), job["phi"], 100)
+out = compiled_lm(model)(z0, jnp.ones(z0.size, bool), job["phi"], 100)
 json.dump({{"z": [float(x) for x in out.z], "lm_steps": int(out.steps),
            "converged": bool(out.converged), "cost": float(out.loss)}}, open(sys.argv[1], "w"))
 """
@@ -516,7 +516,7 @@ def main(repeat: int = 1) -> None:
     import jax.numpy as jnp
 
     import idtool
-    from idtool._fit import _START_BOX, fit_model, fit_start, model_for, quasi_random, solvers
+    from idtool._fit import _START_BOX, compiled_lm, fit_model, fit_start, model_for, quasi_random
 
     t0 = time.perf_counter()
     data = fit_start(idtool.load_dataset(idtool.example_dataset_path()), periods_per_block=ppb)
@@ -543,7 +543,7 @@ def main(repeat: int = 1) -> None:
     residuals(zj, phi).block_until_ready()
     jacobian(zj, phi).block_until_ready()
     coloured(zj, phi)[1].block_until_ready()
-    lm = solvers(model).lm
+    lm = compiled_lm(model)
     mask = jnp.ones(z_start.size, bool)
 
     def micro():

@@ -25,7 +25,6 @@ import collections
 import dataclasses
 import math
 from collections.abc import Callable
-from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -37,17 +36,20 @@ from ._fitmodel import FitModel
 from ._lm import LMResult, levenberg_marquardt
 
 __all__ = [
+    "Z95",
+    "Z_AT_BOUND",
     "Estimate",
     "FitResult",
-    "Solvers",
+    "compiled_lm",
     "fit_model",
     "fit_start",
     "model_for",
     "quasi_random",
-    "solvers",
 ]
 
-_Z95 = 1.959963984540054
+Z95 = 1.959963984540054
+# Internal scale: a bounded parameter beyond this sits at its bound (sigmoid > 0.999).
+Z_AT_BOUND = 7.0
 # Steps per multi-start run: enough to rank the basins (a joint fit from a start takes
 # 20-40); the best is then continued. 10 of 10 two-load designs found the true basin.
 _MULTISTART_STEPS = 20
@@ -114,37 +116,19 @@ class FitResult:
         return self.n_params * math.log(self.n_data) - 2 * self.loglik
 
 
-class Solvers(NamedTuple):
-    """The compiled programs of one :class:`FitModel` (compiled once, then reused by
-    every start, polish, AR(1) round and profile point).
+def compiled_lm(model: FitModel) -> Callable[..., LMResult]:
+    """The compiled Levenberg-Marquardt run of ``model``: ``lm(z0, mask, phi,
+    max_steps)`` fits the AR(1)-whitened residuals (:meth:`FitModel.normal_equations`)
+    and returns them with the per-trace levels. Compiled once, cached on the model, and
+    reused by every start, polish, AR(1) round and profile point."""
+    cached = model.__dict__.get("_compiled_lm")
+    if cached is None:
 
-    ``lm(z0, mask, phi, max_steps)`` runs :func:`idtool._lm.levenberg_marquardt` on the
-    AR(1)-whitened residuals (and returns them, with the per-trace levels).
-    """
+        def lm(z0, mask, phi, max_steps):
+            return levenberg_marquardt(model.normal_equations, z0, phi, mask, max_steps)
 
-    lm: Callable[..., LMResult]
-
-
-def solvers(model: FitModel) -> Solvers:
-    """The compiled solvers of ``model`` (built on first use, then cached on it)."""
-    cached = model.__dict__.get("_solvers")
-    if cached is not None:
-        return cached
-
-    def lm(z0, mask, phi, max_steps):
-        return levenberg_marquardt(
-            model.residuals,
-            model.jacobian_structure,
-            z0,
-            phi,
-            mask,
-            max_steps,
-            equations=model.normal_equations,
-        )
-
-    out = Solvers(jax.jit(lm, compiler_options=_COMPILE))
-    model.__dict__["_solvers"] = out  # frozen dataclass: cache beside its fields
-    return out
+        cached = model.__dict__["_compiled_lm"] = jax.jit(lm, compiler_options=_COMPILE)
+    return cached  # (frozen dataclass: cached beside its fields)
 
 
 # A second fit of the same prepared data (other seed, profile, benchmark) reuses the
@@ -281,7 +265,7 @@ def fit_model(
 ) -> FitResult:
     """Fit one law and coupling to prepared data; see the module docstring."""
     model = model_for(data, law, coupling)
-    lm = solvers(model).lm
+    lm = compiled_lm(model)
     k = len(model.physical_names)
     base = model.z0()
     everything = jnp.ones(base.size, bool)
@@ -382,11 +366,11 @@ def _summarise(
     for i, spec in enumerate(specs):
         value, se = float(vals[i]), float(se_vals[i])
         if spec.bounded:
-            lo = float(spec.value(z[i] - _Z95 * se_z[i]))
-            hi = float(spec.value(z[i] + _Z95 * se_z[i]))
-            at_bound = abs(z[i]) > 7.0
+            lo = float(spec.value(z[i] - Z95 * se_z[i]))
+            hi = float(spec.value(z[i] + Z95 * se_z[i]))
+            at_bound = abs(z[i]) > Z_AT_BOUND
         else:
-            lo, hi, at_bound = value - _Z95 * se, value + _Z95 * se, False
+            lo, hi, at_bound = value - Z95 * se, value + Z95 * se, False
         estimates[spec.name] = Estimate(spec.name, spec.unit, value, se, (lo, hi), at_bound)
         if spec.physical and at_bound:
             warnings.append(

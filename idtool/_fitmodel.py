@@ -103,7 +103,7 @@ def _physical_specs(law: str, coupling: str) -> list[ParamSpec]:
 class FitModel:
     """The model of one dataset for one friction law and one coupling law.
 
-    Compared by identity: its compiled solvers (:mod:`idtool._fit`) are cached on it.
+    Compared by identity: its compiled fit (:func:`idtool._fit.compiled_lm`) is cached on it.
     """
 
     data: FitData
@@ -155,11 +155,6 @@ class FitModel:
         return np.concatenate(
             [np.full(self.n_shared, -1), np.tile(np.arange(n), len(TRACE_GROUPS))]
         )
-
-    @functools.cached_property
-    def jacobian_structure(self) -> ColouredJacobian:
-        """Sparsity of the residuals' Jacobian (per-trace nuisances touch their trace)."""
-        return ColouredJacobian.from_groups(self.param_group, self.data.block_trace)
 
     def values(self, z: Float[Array, " p"]) -> dict[str, Array]:
         """Physical values: shared names map to scalars, per-trace groups to arrays."""
@@ -303,7 +298,8 @@ class FitModel:
             e = self.predict_at_levels(zz, u[:m], u[m : 2 * m]) - self.data.force_n
             return self._whiten(e, phi)
 
-        lv, dlv = levels(z[:k]), jax.jacfwd(levels)(z[:k])  # (2 m,), (2 m, k)
+        # (2 m, k) and (2 m,): the Jacobian and, from the same pass, the levels
+        dlv, lv = jax.jacfwd(lambda zp: (levels(zp),) * 2, has_aux=True)(z[:k])
         u = jnp.concatenate([lv, z[k:]])
         r, jtj_u, jtr_u = normal_equations(resid, u, self.level_structure)
         n_rest = z.size - k

@@ -18,13 +18,12 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
-from ._fit import FitResult, solvers
+from ._fit import Z95, Z_AT_BOUND, FitResult, compiled_lm
 
 __all__ = ["check_intervals", "refit_with_fixed"]
 
 _CHI2_95 = 3.84  # -2 log L rise at the ends of a 95% interval, one parameter
 _TOO_FLAT = 1.0  # a rise below this at an end means the interval is far too narrow
-_Z_BOUND = 7.0  # internal scale: a bounded parameter is at its bound beyond this
 
 
 def refit_with_fixed(
@@ -37,7 +36,7 @@ def refit_with_fixed(
     """
     z = jnp.asarray(result.z if z_start is None else z_start)
     mask = jnp.ones(z.size, bool).at[i].set(False)
-    out = solvers(result.model).lm(z.at[i].set(zi), mask, result.phi, 100)
+    out = compiled_lm(result.model)(z.at[i].set(zi), mask, result.phi, 100)
     sigma2 = result.rss / (result.n_data - result.z.size)
     return (2.0 * float(out.loss) - result.rss) / sigma2, np.asarray(out.z)
 
@@ -49,8 +48,8 @@ def _profile_end(result: FitResult, i: int, side: float, se: float) -> float:
     step = se
     while True:
         z_next = float(result.z[i]) + side * step
-        if abs(z_next) > _Z_BOUND:
-            return side * _Z_BOUND
+        if abs(z_next) > Z_AT_BOUND:
+            return side * Z_AT_BOUND
         d_next, z_warm = refit_with_fixed(result, i, z_next, z_warm)
         if d_next >= _CHI2_95:
             return float(np.interp(_CHI2_95, [d_prev, d_next], [z_prev, z_next]))
@@ -73,8 +72,8 @@ def check_intervals(result: FitResult) -> FitResult:
         est = estimates[name]
         ends = []
         for side, value in ((-1.0, est.ci95[0]), (1.0, est.ci95[1])):
-            zi = float(result.z[i]) + side * 1.959963984540054 * se
-            rise = refit_with_fixed(result, i, zi)[0] if abs(zi) < _Z_BOUND else _CHI2_95
+            zi = float(result.z[i]) + side * Z95 * se
+            rise = refit_with_fixed(result, i, zi)[0] if abs(zi) < Z_AT_BOUND else _CHI2_95
             if rise < _TOO_FLAT:
                 z_end = _profile_end(result, i, side, se)
                 value = float(spec.value(jnp.asarray(z_end)))

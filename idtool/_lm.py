@@ -33,7 +33,13 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-__all__ = ["ColouredJacobian", "LMResult", "levenberg_marquardt", "normal_equations"]
+__all__ = [
+    "ColouredJacobian",
+    "LMResult",
+    "coloured_equations",
+    "levenberg_marquardt",
+    "normal_equations",
+]
 
 
 class ColouredJacobian(eqx.Module):
@@ -107,8 +113,8 @@ def normal_equations(
 class LMResult(eqx.Module):
     """Outcome of :func:`levenberg_marquardt`.
 
-    ``residuals`` are ``fn(z, args)``; ``aux`` what ``equations`` returned beside the
-    normal equations at ``z`` (``()`` without it); ``jtj`` and ``jtr`` the normal equations at
+    ``residuals`` are the residuals at ``z``; ``aux`` what ``equations`` returned
+    beside the normal equations there; ``jtj`` and ``jtr`` the normal equations at
     ``z`` (masked parameters included), ready for a Gauss-Newton covariance.
     ``steps`` counts trial steps (accepted or not), ``n_jacobians`` linearisations
     (each the residuals and one JVP per colour): the start point and every trial.
@@ -134,18 +140,32 @@ def _masked(jtj, jtr, mask):
     )
 
 
+def coloured_equations(
+    fn: Callable[[Array, Any], Array], structure: ColouredJacobian
+) -> Callable[[Array, Any], tuple[Array, Array, Array, tuple]]:
+    """The ``equations`` of :func:`levenberg_marquardt` for residuals ``fn(z, args)``
+    with the sparsity ``structure``: :func:`normal_equations`, no auxiliary output."""
+
+    def equations(z, args):
+        return (*normal_equations(lambda y: fn(y, args), z, structure), ())
+
+    return equations
+
+
 def levenberg_marquardt(
-    fn: Callable[[Array, Any], Array],
-    structure: ColouredJacobian,
+    equations: Callable[[Array, Any], tuple[Array, Array, Array, Any]],
     z0: Float[Array, " p"],
     args: Any,
     mask: Bool[Array, " p"],
     max_steps: int | Array = 100,
     tol: float = 1e-8,
     max_step: float = 5.0,
-    equations: Callable[[Array, Any], tuple[Array, Array, Array, Any]] | None = None,
 ) -> LMResult:
-    """Minimise ``0.5 |fn(z, args)|^2`` over the parameters in ``mask``.
+    """Minimise ``0.5 |r(z)|^2`` over the parameters in ``mask``.
+
+    ``equations(z, args) -> (r, J^T J, J^T r, aux)`` linearises the residuals at ``z``
+    (:func:`coloured_equations` builds it from a residual function and its sparsity);
+    ``aux`` (any pytree it computes on the way) is returned for the final ``z``.
 
     Convergence: the Gauss-Newton decrement ``g^T (J^T J)^-1 g`` (twice the decrease a
     full Gauss-Newton step still promises) falls below ``tol`` times the residual
@@ -155,20 +175,12 @@ def levenberg_marquardt(
     explodes (no downhill step exists in floating point).
 
     No step moves a parameter by more than ``max_step`` on the internal scale.
-
-    ``equations(z, args) -> (r, J^T J, J^T r, aux)``, if given, replaces the coloured
-    :func:`normal_equations` of ``structure``; ``aux`` (any pytree it computes on the
-    way) is returned for the final ``z``.
     """
     z0 = jnp.asarray(z0, float)
     p = z0.size
 
     def linearise(z):
-        if equations is None:
-            r, jtj, jtr = normal_equations(lambda y: fn(y, args), z, structure)
-            aux = ()
-        else:
-            r, jtj, jtr, aux = equations(z, args)
+        r, jtj, jtr, aux = equations(z, args)
         return (r, jtj, jtr, *_masked(jtj, jtr, mask), aux)
 
     def converged(a, g, loss, n):

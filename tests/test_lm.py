@@ -9,7 +9,12 @@ from scipy.optimize import least_squares
 
 import idtool
 from idtool._fit import fit_start, model_for
-from idtool._lm import ColouredJacobian, levenberg_marquardt, normal_equations
+from idtool._lm import (
+    ColouredJacobian,
+    coloured_equations,
+    levenberg_marquardt,
+    normal_equations,
+)
 
 # Three groups of decays sharing a rate k; each group has its own amplitude and offset.
 TIMES = np.linspace(0.0, 3.0, 40)
@@ -59,12 +64,13 @@ def test_normal_equations_equal_the_dense_jacobians_for_the_bench_model():
     def fn(zz):
         return model.residuals(zz, 0.5)
 
-    _, jtj, jtr = jax.jit(lambda zz: normal_equations(fn, zz, model.jacobian_structure))(z)
+    structure = ColouredJacobian.from_groups(model.param_group, data.block_trace)
+    _, jtj, jtr = jax.jit(lambda zz: normal_equations(fn, zz, structure))(z)
     jac = jax.jit(jax.jacfwd(fn))(z)
     scale = np.sqrt(np.outer(np.diag(jac.T @ jac), np.diag(jac.T @ jac)))
     assert np.max(np.abs(jtj - jac.T @ jac) / scale) < 1e-10
     np.testing.assert_allclose(jtr, jac.T @ fn(z), rtol=1e-9, atol=1e-9 * np.max(np.abs(jtr)))
-    assert model.jacobian_structure.seeds.shape[0] == model.n_shared + 4  # 10, not 102
+    assert structure.seeds.shape[0] == model.n_shared + 4  # 10, not 102
     # What the fit uses: the chain rule through the per-trace levels (8 JVPs).
     r2, jtj2, jtr2, (levels, dlevels) = jax.jit(model.normal_equations)(z, 0.5)
     np.testing.assert_allclose(r2, fn(z), rtol=1e-12, atol=1e-10)
@@ -92,7 +98,7 @@ def test_lm_matches_scipy_least_squares():
     fn, structure = decay_problem()
     z0 = np.array([0.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
     out = jax.jit(levenberg_marquardt, static_argnums=0)(
-        fn, structure, jnp.asarray(z0), 1.0, jnp.ones(7, bool), 100
+        coloured_equations(fn, structure), jnp.asarray(z0), 1.0, jnp.ones(7, bool), 100
     )
     ref = least_squares(lambda z: np.asarray(fn(jnp.asarray(z))), z0, xtol=1e-15, ftol=1e-15)
     assert bool(out.converged)
@@ -110,7 +116,7 @@ def test_masked_parameters_stay_put_and_the_rest_is_optimal_given_them():
     fn, structure = decay_problem()
     z0 = jnp.array([0.5, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
     mask = jnp.array([False, True, True, True, True, True, True])
-    out = levenberg_marquardt(fn, structure, z0, 1.0, mask, 100)
+    out = levenberg_marquardt(coloured_equations(fn, structure), z0, 1.0, mask, 100)
     assert float(out.z[0]) == 0.5
     # With k fixed the model is linear in the rest: compare with the linear solve.
     basis = np.exp(-np.exp(0.5) * TIMES)
@@ -124,7 +130,7 @@ def test_masked_parameters_stay_put_and_the_rest_is_optimal_given_them():
 def test_max_steps_stops_the_loop_and_says_not_converged():
     fn, structure = decay_problem()
     z0 = jnp.array([2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-    out = levenberg_marquardt(fn, structure, z0, 1.0, jnp.ones(7, bool), 2)
+    out = levenberg_marquardt(coloured_equations(fn, structure), z0, 1.0, jnp.ones(7, bool), 2)
     assert int(out.steps) == 2
     assert not bool(out.converged)
 
@@ -136,7 +142,7 @@ def test_lm_matches_optimistix_levenberg_marquardt():
 
     fn, structure = decay_problem(seed=3)
     z0 = jnp.array([0.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
-    ours = levenberg_marquardt(fn, structure, z0, 1.0, jnp.ones(7, bool), 100)
+    ours = levenberg_marquardt(coloured_equations(fn, structure), z0, 1.0, jnp.ones(7, bool), 100)
     ref = optx.least_squares(
         lambda z, _: fn(z), optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12), z0, max_steps=200
     )
