@@ -1,7 +1,7 @@
 """Benchmark: joint fit of the example dataset, idtool (JAX) against plain SciPy/NumPy.
 
 The model (Dahl law, power-limited coupling) and the fitting problem are those of
-:class:`idtool._fitmodel.FitModel`, re-implemented here without JAX:
+:class:`idtool._model._benchmodel.FitModel`, re-implemented here without JAX:
 
 * contact: the friction ratio FR at each operating point from the Dahl bristle ODE
   ``df/dtheta = Lambda (VR + cos theta)(1 - sgn(VR + cos theta) f)`` solved by
@@ -11,7 +11,7 @@ The model (Dahl law, power-limited coupling) and the fitting problem are those o
   distinct operating point (6 for the 24 traces) and reused while the four physical
   parameters are unchanged, so the finite-difference columns of the (98) bench
   nuisances cost no ODE solve: generous to SciPy (idtool recomputes all 24 every evaluation);
-* bench: the piecewise trace of :func:`idtool._bench.mean_force_n` (load-cell offset,
+* bench: the piecewise trace of :func:`idtool._model._bench.mean_force_n` (load-cell offset,
   start-up ramp, actuator-limited slope down while ON and back up after, corners rounded
   over 0.5 N) evaluated sample by sample in a plain Python loop (20 264 model points per
   evaluation), checked against ``mean_force_n`` to 1e-9 N. A vectorised NumPy version is
@@ -19,7 +19,7 @@ The model (Dahl law, power-limited coupling) and the fitting problem are those o
 * the same block-averaged data (``prepare_fit_data``, ``periods_per_block=2``), the same
   data-driven start values, parameters and transforms (the ``FitModel.specs`` numbers,
   evaluated in NumPy), the same exact AR(1) whitening;
-* the same procedure as :func:`idtool._fit.fit_model`: 8 quasi-random starts (seed 0,
+* the same procedure as :func:`idtool._fit._fit.fit_model`: 8 quasi-random starts (seed 0,
   the same points), from each a joint fit of all parameters for 20 steps, the lowest
   end point taken to convergence, then phi re-estimated and the polish repeated until
   phi moves by less than 0.02 (at most 3 rounds). The optimiser is
@@ -39,7 +39,7 @@ imports and JIT compilation all count):
 2. the matched polish alone: all (102) parameters from idtool's multi-start optimum (the
    nuisances at their start values, where ``fit_model`` starts its polish) with phi
    fixed at idtool's final value; idtool runs its own compiled Levenberg-Marquardt
-   (``idtool._fit.compiled_lm``), SciPy ``least_squares`` as above.
+   (``idtool._fit._fit.compiled_lm``), SciPy ``least_squares`` as above.
 
 In-process it also measures idtool's warm ``fit_model`` (a second call on the same
 data: its compiled programs are reused), the cost of one jitted residual evaluation, of
@@ -84,7 +84,7 @@ from scipy.optimize import least_squares
 
 PHYSICAL = ("Kt", "mu", "coupling_gain", "power_load_n")
 PERIODS_PER_BLOCK = 2
-CORNER_N = 0.5  # idtool._fitmodel.CORNER_N
+CORNER_N = 0.5  # idtool._model._benchmodel.CORNER_N
 # fit_model's procedure (idtool/_fit.py at the time of writing)
 N_STARTS, SEED = 8, 0
 MULTISTART_MAX_NFEV = 20  # fit_model: _MULTISTART_STEPS (joint runs from each start)
@@ -109,7 +109,7 @@ jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.05)
 IDTOOL_FULL = """
 import json, sys
 import idtool
-from idtool._fit import fit_model, fit_start
+from idtool._fit._fit import fit_model, fit_start
 
 data = fit_start(idtool.load_dataset(idtool.example_dataset_path()), periods_per_block={ppb})
 r = fit_model(data)
@@ -128,7 +128,7 @@ IDTOOL_POLISH = """
 import json, sys
 import jax.numpy as jnp
 import idtool
-from idtool._fit import compiled_lm, fit_start, model_for
+from idtool._fit._fit import compiled_lm, fit_start, model_for
 
 job = json.load(open(sys.argv[2]))
 data = fit_start(idtool.load_dataset(idtool.example_dataset_path()), periods_per_block={ppb})
@@ -516,7 +516,14 @@ def main(repeat: int = 1) -> None:
     import jax.numpy as jnp
 
     import idtool
-    from idtool._fit import _START_BOX, compiled_lm, fit_model, fit_start, model_for, quasi_random
+    from idtool._fit._fit import (
+        _START_BOX,
+        compiled_lm,
+        fit_model,
+        fit_start,
+        model_for,
+        quasi_random,
+    )
 
     t0 = time.perf_counter()
     data = fit_start(idtool.load_dataset(idtool.example_dataset_path()), periods_per_block=ppb)

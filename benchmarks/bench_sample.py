@@ -1,6 +1,6 @@
 """Benchmark: posterior sampling of the example fit, idtool (JAX) against NumPy/SciPy.
 
-Same target on both sides: the log-posterior of :mod:`idtool._likelihood` for the
+Same target on both sides: the log-posterior of :mod:`idtool._posterior._likelihood` for the
 example dataset's fit (Dahl law, power-limited coupling, AR(1) noise; 8 sampled
 parameters, the 96 per-trace nuisances integrated out), and the same emcee moves.
 
@@ -202,7 +202,7 @@ class NumpyPosterior:
             [np.bincount(a["block_trace"], jw[:, j], self.n_traces) for j in range(jw.shape[1])], 1
         )
         g = a["gram"][0] + phi * a["gram"][1] + phi**2 * a["gram"][2]
-        sd = 100.0  # idtool._likelihood.NUISANCE_PRIOR_SD
+        sd = 100.0  # idtool._posterior._likelihood.NUISANCE_PRIOR_SD
         mat = g / sigma**2 + np.eye(g.shape[-1]) / sd**2
         chol = np.linalg.cholesky(mat)
         y = np.linalg.solve(chol, (-h / sigma**2)[..., None])
@@ -224,8 +224,8 @@ def main() -> None:
     import emcee
 
     import idtool
-    from idtool._fitrun import fit_dataset
-    from idtool._sample import LogPosterior, sample_posterior
+    from idtool._fit._run import fit_dataset
+    from idtool._posterior._sample import LogPosterior, sample_posterior
 
     print("fitting the example dataset ...", flush=True)
     t0 = time.perf_counter()
@@ -243,13 +243,13 @@ def main() -> None:
     stretch = None
     if not args.quick:
         print("idtool: the same with emcee's default stretch move ...", flush=True)
-        import idtool._sample as sample_module
+        import idtool._posterior._sample as sample_module
 
         sample_module._moves = lambda: [(emcee.moves.StretchMove(), 1.0)]
         stretch = sample_posterior(fit, walkers=WALKERS, steps=STEPS, seed=0)
 
     # the same posterior in NumPy/SciPy
-    from idtool._likelihood import build_target
+    from idtool._posterior._likelihood import build_target
 
     target = build_target(fit.model, fit.z, "ar1", post.priors)
     numpy_lp = NumpyPosterior(target)

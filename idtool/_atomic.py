@@ -1,4 +1,8 @@
-"""All-or-nothing output folders: written to a temporary sibling, renamed into place."""
+"""All-or-nothing outputs: written to a temporary sibling, renamed into place.
+
+:func:`atomic_file` for one file (every writer of a single output file uses it),
+:func:`atomic_output_dir` for a whole output folder.
+"""
 
 from __future__ import annotations
 
@@ -9,9 +13,34 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-from ._errors import IdtoolError
+from idtool._errors import IdtoolError
 
-__all__ = ["atomic_output_dir", "refuse_existing"]
+__all__ = ["atomic_file", "atomic_output_dir", "refuse_existing", "write_text_atomic"]
+
+
+@contextlib.contextmanager
+def atomic_file(path: str | os.PathLike[str], *, sync: bool = False) -> Iterator[Path]:
+    """Yield a temporary sibling of ``path`` (``path.partial``) to write; when the block
+    succeeds it is renamed over ``path`` (atomic on one file system), else removed, so
+    ``path`` is always either the old file or the complete new one. ``sync`` flushes
+    the file to disk before the rename (for a checkpoint that must survive a crash)."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".partial")
+    try:
+        yield tmp
+        if sync:
+            with open(tmp, "rb+") as fh:
+                os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def write_text_atomic(path: str | os.PathLike[str], text: str) -> Path:
+    """Write ``text`` to ``path`` all or nothing (:func:`atomic_file`)."""
+    with atomic_file(path) as tmp:
+        tmp.write_text(text)
+    return Path(path)
 
 
 def refuse_existing(out: str | os.PathLike[str], force: bool) -> None:

@@ -7,7 +7,7 @@ import math
 import re
 from typing import Any
 
-from ._errors import Problem
+from idtool._errors import Problem
 
 __all__ = ["parse_json"]
 

@@ -33,7 +33,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import idtool
-from idtool import _limits as limits
+from idtool._model import _limits as limits
 
 # %% [markdown]
 # ## 1. Friction ratio against velocity ratio
@@ -95,7 +95,7 @@ fig.savefig("/tmp/idtool_nb01_march.png", dpi=80)
 # ## 3. Section 3.6 sweeps (a subset, to keep the notebook quick)
 
 # %%
-from idtool._seed_study import SEED_FIGURES, seed_study  # noqa: E402
+from idtool._model._seed_study import SEED_FIGURES, seed_study  # noqa: E402
 
 table = seed_study(velocity_ratios=np.linspace(0.05, 1.1, 8), figures=SEED_FIGURES[:2])
 print(table.groupby(["figure", "value"]).friction_ratio.mean().round(3))

@@ -31,8 +31,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import idtool
-from idtool._fitreport import fit_report
-from idtool._fitrun import fit_dataset
+from idtool._report._fit_text import fit_report
+from idtool._fit._run import fit_dataset
 
 # %% [markdown]
 # ## A bench session on a stiffer, slipperier webbing (simulated)

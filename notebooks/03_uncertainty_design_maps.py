@@ -29,9 +29,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import idtool
-from idtool._cli import main
-from idtool._fitstore import load_fit
-from idtool._predict import amplitude_for_reduction, prediction_draws, predict_friction_ratio
+from idtool._cli._main import main
+from idtool._fit._store import load_fit
+from idtool._predict._predict import amplitude_for_reduction, prediction_draws, predict_friction_ratio
 
 # %% [markdown]
 # ## Fit and sample the shipped example dataset

@@ -10,9 +10,9 @@ import functools
 import json
 
 import idtool
-from idtool._fitrun import FitRun, fit_dataset
-from idtool._sim_params import BenchParams
-from idtool._simulate import operating_point
+from idtool._fit._run import FitRun, fit_dataset
+from idtool._simulate._params import BenchParams
+from idtool._simulate._simulate import operating_point
 
 COVERAGE_SEEDS = tuple(range(6))
 HELD_OUT_LOAD = 450.0

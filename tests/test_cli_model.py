@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from idtool._cli import main
-from idtool._limits import coulomb_friction_ratio
+from idtool._cli._main import main
+from idtool._model._limits import coulomb_friction_ratio
 
 
 def test_curve_json_has_the_documented_keys(capsys):
@@ -47,7 +47,7 @@ def test_curve_bad_input_exits_2_with_a_message(args, capsys):
 
 def test_console_script_bad_input_has_no_traceback():
     proc = subprocess.run(
-        [sys.executable, "-m", "idtool._cli", "curve", "--vr", "x"],
+        [sys.executable, "-m", "idtool._cli._main", "curve", "--vr", "x"],
         capture_output=True,
         text=True,
         check=False,

@@ -9,7 +9,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import idtool
-from idtool import _limits as limits
+from idtool._model import _limits as limits
 
 
 def cycle(law, vr, a=1.0, w=1.0, n_phase=256):
@@ -22,7 +22,7 @@ def dahl(lam):
 
 
 def np_force_rate(kt, fc, fs=None, vs=1.0):
-    """dF/dt of LuGre/Dahl written afresh in NumPy (independent of idtool._laws)."""
+    """dF/dt of LuGre/Dahl written afresh in NumPy (independent of idtool._model._laws)."""
     fs = fc if fs is None else fs
 
     def rate(f, v):

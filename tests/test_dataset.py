@@ -33,14 +33,14 @@ from hypothesis import strategies as st
 
 import idtool
 from idtool import Dataset, load_dataset
-from idtool._errors import IdtoolError
-from idtool._schema import (
+from idtool._data._schema import (
     DATASET_SCHEMA,
     SIMULATOR_PARAMS_SCHEMA,
     TRACE_TABLE_SCHEMA,
     load_schema,
     trace_columns,
 )
+from idtool._errors import IdtoolError
 
 
 def _problems(path: Path) -> tuple[IdtoolError, list[str]]:

@@ -13,10 +13,9 @@ from sample_helpers import truth as small_truth
 from scipy.integrate import solve_ivp
 
 import idtool
-from idtool._cli import main
-from idtool._fitdata import start_values
-from idtool._fitmodel import FitModel
-from idtool._fitrun import fit_dataset
+from idtool._cli._main import main
+from idtool._fit._run import fit_dataset
+from idtool._model._benchmodel import bench_model
 
 PHYSICAL = ("Kt", "mu", "coupling_gain", "power_load_n")
 
@@ -105,7 +104,7 @@ def test_single_load_warns_that_the_coupling_cannot_be_told_apart():
     limited = fit_dataset(dataset, coupling="power-limited", seed=0)
     assert any("cannot be told apart" in w for w in limited.chosen.warnings)
     auto = fit_dataset(dataset, coupling="auto", seed=0)
-    assert auto.chosen.model.coupling == "constant"
+    assert auto.chosen.model.coupling.name == "constant"
     assert "one normal load" in auto.reason
 
 
@@ -129,12 +128,14 @@ def test_cycle_average_matches_brute_force_fast_dynamics():
     window (LSODA, the raw sgn ODE) from the OFF state; after a few cycles its running
     mean is the cycle-averaged ON level the bench model uses."""
     mu, kt, load, alpha, speed = 0.3, 1e9, 450.0, 0.5, 0.025
-    coupling = idtool._coupling.PowerLimitedCoupling(gain=0.03, power_load_n=125.0)
+    coupling = idtool._model._coupling.PowerLimitedCoupling(gain=0.03, power_load_n=125.0)
     a = float(coupling.amplitude_m(alpha, load, 85e-6))
     w = 2 * np.pi * 20e3
     fc = mu * load
     law = idtool.Dahl(fc_n=fc, kt_n_m=kt)
-    fr = float(idtool._bench.on_friction_ratio(law, coupling, load, alpha, speed, 20e3, 85e-6))
+    fr = float(
+        idtool._model._bench.on_friction_ratio(law, coupling, load, alpha, speed, 20e3, 85e-6)
+    )
 
     def rhs(t, y):
         v = speed + a * w * np.cos(w * t)
@@ -205,7 +206,7 @@ def test_same_seed_same_fit():
     a = fit_dataset(dataset, seed=2)
     b = fit_dataset(copy.deepcopy(dataset), seed=2)
     np.testing.assert_array_equal(a.chosen.z, b.chosen.z)
-    model = FitModel(a.data, start_values(a.data))
+    model = bench_model(a.data)
     assert model.names == a.chosen.model.names
 
 
@@ -237,13 +238,13 @@ def test_lugre_fit_runs_and_ranks_against_dahl():
     lugre = run.candidates["lugre/power-limited"]
     assert {"static_ratio", "stribeck_velocity_m_s"} <= set(lugre.model.physical_names)
     # The data come from Dahl: LuGre's two extra parameters cannot win by BIC.
-    assert run.chosen.model.law == "dahl"
+    assert run.chosen.model.law.name == "dahl"
 
 
 def test_multistart_points_are_seeded_and_evenly_spread():
     from scipy.stats import qmc
 
-    from idtool._fit import quasi_random
+    from idtool._fit._fit import quasi_random
 
     a, b = quasi_random(64, 4, seed=1), quasi_random(64, 4, seed=1)
     np.testing.assert_array_equal(a, b)

@@ -1,4 +1,4 @@
-"""The Levenberg-Marquardt solver with a coloured Jacobian (idtool._lm), checked against
+"""The Levenberg-Marquardt solver with a coloured Jacobian (idtool._fit._lm), checked against
 dense JAX Jacobians and SciPy's least_squares."""
 
 import jax
@@ -8,13 +8,14 @@ import pytest
 from scipy.optimize import least_squares
 
 import idtool
-from idtool._fit import fit_start, model_for
-from idtool._lm import (
+from idtool._data._blocks import prepare_fit_data
+from idtool._fit._lm import (
     ColouredJacobian,
     coloured_equations,
     levenberg_marquardt,
     normal_equations,
 )
+from idtool._model._benchmodel import bench_model
 
 # Three groups of decays sharing a rate k; each group has its own amplitude and offset.
 TIMES = np.linspace(0.0, 3.0, 40)
@@ -56,8 +57,8 @@ def test_normal_equations_equal_the_dense_jacobians_on_a_toy_problem():
 def test_normal_equations_equal_the_dense_jacobians_for_the_bench_model():
     """The fit's whitened residuals mix neighbouring blocks, but never across traces,
     so the colouring stays exact (rel 1e-10: only summation order differs)."""
-    data = fit_start(idtool.load_dataset(idtool.example_dataset_path()), periods_per_block=2)
-    model = model_for(data, "dahl", "power-limited")
+    data = prepare_fit_data(idtool.load_dataset(idtool.example_dataset_path()), periods_per_block=2)
+    model = bench_model(data, "dahl", "power-limited")
     rng = np.random.default_rng(1)
     z = jnp.asarray(model.z0() + 0.3 * rng.standard_normal(len(model.names)))
 
@@ -72,7 +73,7 @@ def test_normal_equations_equal_the_dense_jacobians_for_the_bench_model():
     np.testing.assert_allclose(jtr, jac.T @ fn(z), rtol=1e-9, atol=1e-9 * np.max(np.abs(jtr)))
     assert structure.seeds.shape[0] == model.n_shared + 4  # 10, not 102
     # What the fit uses: the chain rule through the per-trace levels (8 JVPs).
-    r2, jtj2, jtr2, (levels, dlevels) = jax.jit(model.normal_equations)(z, 0.5)
+    r2, jtj2, jtr2, (levels, dlevels) = jax.jit(lambda m, zz: m.normal_equations(zz, 0.5))(model, z)
     np.testing.assert_allclose(r2, fn(z), rtol=1e-12, atol=1e-10)
     assert np.max(np.abs(jtj2 - jac.T @ jac) / scale) < 1e-9
     np.testing.assert_allclose(jtr2, jac.T @ fn(z), rtol=1e-8, atol=1e-9 * np.max(np.abs(jtr)))

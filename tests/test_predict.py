@@ -1,17 +1,22 @@
 """Predictions (issue 5) and the ``idtool sample`` / ``idtool predict`` commands."""
 
 import json
+import shutil
 
 import numpy as np
 import pytest
 from sample_helpers import small_fit
 
 import idtool
-from idtool._cli import main
-from idtool._diagnostics import import_arviz
-from idtool._fitreport import fit_json
-from idtool._fitstore import load_fit, save_fit_state
-from idtool._predict import amplitude_for_reduction, predict_friction_ratio, prediction_draws
+from idtool._cli._main import main
+from idtool._fit._store import load_stored_fit, save_fit_state
+from idtool._posterior._diagnostics import import_arviz
+from idtool._predict._predict import (
+    amplitude_for_reduction,
+    predict_friction_ratio,
+    prediction_draws,
+)
+from idtool._report._fit_text import fit_json
 
 
 @pytest.fixture(scope="module")
@@ -48,12 +53,13 @@ def test_predict_without_a_posterior_uses_the_fit_covariance(fit_folder, capsys)
 
 
 @pytest.fixture(scope="module")
-def sampled(fit_folder):
-    """``idtool sample`` on the folder: short, so not converged."""
-    assert (
-        main(["sample", str(fit_folder), "--walkers", "20", "--steps", "60", "--no-progress"]) == 0
-    )
-    return fit_folder
+def sampled(fit_folder, tmp_path_factory):
+    """``idtool sample`` on a copy of the folder (so the tests without a posterior see
+    none, whatever the order they run in): short, so not converged."""
+    folder = tmp_path_factory.mktemp("sampled") / "small"
+    shutil.copytree(fit_folder, folder)
+    assert main(["sample", str(folder), "--walkers", "20", "--steps", "60", "--no-progress"]) == 0
+    return folder
 
 
 def test_sample_command_writes_the_posterior_next_to_the_fit(sampled, capsys):
@@ -116,7 +122,7 @@ def test_amplitude_for_a_target_reduction_and_out_of_reach(sampled, capsys):
     alpha = inv["amplitude_fraction"]["median"]
     assert 0 < lo <= alpha <= hi <= 1
     # forward check: at that amplitude the median reduction is the target
-    fit = load_fit(sampled)
+    fit = load_stored_fit(sampled)
     draws = prediction_draws(fit, max_draws=500)
     (p,) = predict_friction_ratio(draws, [450.0], [alpha], [0.025])
     assert p.median == pytest.approx(0.5, abs=0.01)

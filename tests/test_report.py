@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import idtool
-from idtool._cli import main
-from idtool._report import SECTIONS
+from idtool._cli._main import main
+from idtool._report._html import SECTIONS
 
 
 @pytest.fixture(scope="module")

@@ -20,24 +20,25 @@ from sample_helpers import (
 )
 
 import idtool
-import idtool._fit
-from idtool._chainfile import read_chain
-from idtool._diagnostics import diagnose
+import idtool._fit._fit
+from idtool._data._blocks import prepare_fit_data
 from idtool._errors import IdtoolError
-from idtool._fitdata import prepare_fit_data, start_values
-from idtool._fitmodel import FitModel
-from idtool._fitrun import fit_dataset
-from idtool._likelihood import (
-    _whiten,
+from idtool._fit._run import fit_dataset
+from idtool._model._benchmodel import bench_model
+from idtool._model._noise import whiten
+from idtool._posterior._chainfile import read_chain
+from idtool._posterior._diagnostics import diagnose
+from idtool._posterior._likelihood import (
     build_target,
     conditioning_shrinkage,
     marginal_loglik,
     physical_values,
     predict_blocks,
+    sampled_params,
 )
-from idtool._predict import draws_of, predict_friction_ratio
-from idtool._prior import default_prior, read_priors
-from idtool._sample import sample_posterior, sampled_params
+from idtool._posterior._prior import default_prior, read_priors
+from idtool._posterior._sample import sample_posterior
+from idtool._predict._predict import draws_from_posterior, predict_friction_ratio
 
 WALKERS, STEPS = 32, 300
 
@@ -50,7 +51,9 @@ def covered(post, fit_model) -> dict[str, bool]:
     for name, value in truth().items():
         lo, hi = np.percentile(draws[name], [2.5, 97.5])
         out[name] = bool(lo <= value <= hi)
-    preds = predict_friction_ratio(draws_of(post, fit_model), [HELD_OUT_LOAD], AMPLITUDES, [0.025])
+    preds = predict_friction_ratio(
+        draws_from_posterior(post, fit_model), [HELD_OUT_LOAD], AMPLITUDES, [0.025]
+    )
     for p in preds:
         true_fr = true_friction_ratio(HELD_OUT_LOAD, p.amplitude_fraction)
         out[f"FR({HELD_OUT_LOAD:g} N, {p.amplitude_fraction:g})"] = (
@@ -124,7 +127,9 @@ def test_independent_noise_gives_falsely_tight_posteriors(coverage_runs):
 def test_held_out_load_prediction_is_within_0_03_and_inside_the_band(coverage_runs):
     """Fitted on 270 and 670 N only: FR at 450 N against the simulator's truth."""
     _, fit, ar1, _ = coverage_runs[1]
-    preds = predict_friction_ratio(draws_of(ar1, fit.model), [HELD_OUT_LOAD], AMPLITUDES, [0.025])
+    preds = predict_friction_ratio(
+        draws_from_posterior(ar1, fit.model), [HELD_OUT_LOAD], AMPLITUDES, [0.025]
+    )
     for p in preds:
         true_fr = true_friction_ratio(HELD_OUT_LOAD, p.amplitude_fraction)
         assert abs(p.median - true_fr) < 0.03
@@ -139,7 +144,7 @@ def test_walkers_leave_a_local_optimum_of_the_fit(monkeypatch):
     dataset, _ = idtool.simulate_bench(small_params(), seed=0)
     good = fit_dataset(dataset, seed=0).chosen
     start = {"Kt": 8e7, "coupling_gain": 0.03, "power_load_n": 125.0}
-    monkeypatch.setattr(idtool._fit, "_start_point", lambda model, u: dict(start))
+    monkeypatch.setattr(idtool._fit._fit, "_start_point", lambda model, u: dict(start))
     local = fit_dataset(dataset, seed=0, n_starts=1).chosen
     assert local.estimates["Kt"].estimate < 3e8  # the set-up: a local optimum
     fit = dataclasses.replace(local, optima=[*local.optima, *good.optima])
@@ -176,7 +181,7 @@ def test_resumed_chain_equals_an_uninterrupted_one(tmp_path, monkeypatch):
     chain = tmp_path / "chain.h5"
 
     # interrupted at step 25 (checkpoints every step), then resumed
-    import idtool._sample as sample_module
+    import idtool._posterior._sample as sample_module
 
     class Interrupt:
         def __init__(self):
@@ -223,9 +228,9 @@ def test_marginal_likelihood_equals_the_dense_gaussian_integral():
     e.update(sliding_before_s=1.0, sliding_after_s=1.0)
     dataset, _ = idtool.simulate_bench(params, seed=2)
     data = prepare_fit_data(dataset, periods_per_block=2)
-    model = FitModel(data, start_values(data), coupling="constant")
+    model = bench_model(data, coupling="constant")
     z = model.z0(Kt=1e9, coupling_gain=0.02)
-    table = {p.name: default_prior(p) for p in sampled_params(model, "ar1")}
+    table = {p.name: default_prior(p) for p in sampled_params(model)}
     target = build_target(model, z, "ar1", table)
     theta = jnp.asarray(np.concatenate([z[: model.n_shared], [0.0, 0.4]]))
     v = physical_values(theta, target)
@@ -233,23 +238,23 @@ def test_marginal_likelihood_equals_the_dense_gaussian_integral():
     ll, _ = marginal_loglik(e_res, v, target)
 
     sigma, phi = float(v["sigma_n"]), float(v["phi"])
-    w = np.asarray(_whiten(e_res, target.first, phi))
-    jw = np.asarray(_whiten(target.jac_e, target.first, phi))
-    n, t = w.size, np.asarray(target.block_trace)
-    big = np.zeros((n, 4 * target.n_traces))  # nuisance columns of every trace
-    for i in range(target.n_traces):
+    w = np.asarray(whiten(e_res, target.first, phi))
+    jw = np.asarray(whiten(target.jac_e, target.first, phi))
+    n, t = w.size, np.asarray(target.model.data.block_trace)
+    big = np.zeros((n, 4 * target.model.data.n_traces))  # nuisance columns of every trace
+    for i in range(target.model.data.n_traces):
         big[t == i, 4 * i : 4 * i + 4] = jw[t == i]
     cov = sigma**2 * np.eye(n) + 100.0**2 * big @ big.T
     sign, logdet = np.linalg.slogdet(cov)
     dense = -0.5 * (n * np.log(2 * np.pi) + logdet + w @ np.linalg.solve(cov, w))
-    dense += 0.5 * target.n_traces * np.log(1 - phi**2)
+    dense += 0.5 * target.model.data.n_traces * np.log(1 - phi**2)
     assert sign > 0
     assert float(ll) == pytest.approx(dense, rel=1e-8)  # the dense side loses ~1e-9
 
 
 def test_priors_file_overrides_and_bad_files(tmp_path):
     _, run = small_fit(1)
-    params = sampled_params(run.chosen.model, "ar1")
+    params = sampled_params(run.chosen.model)
     good = tmp_path / "priors.toml"
     good.write_text('[mu]\ndist = "normal"\nmean = 0.3\nsd = 0.05\n')
     assert read_priors(good, params)["mu"].describe() == "normal(mean=0.3, sd=0.05)"
@@ -294,7 +299,7 @@ def test_jit_vmap_log_posterior_matches_the_fit_model():
     are the fit model's."""
     _, run = small_fit(1)
     fit = run.chosen
-    table = {p.name: default_prior(p) for p in sampled_params(fit.model, "ar1")}
+    table = {p.name: default_prior(p) for p in sampled_params(fit.model)}
     target = build_target(fit.model, fit.z, "ar1", table)
     v = {p.name: p.value(jnp.asarray(fit.z[i])) for i, p in enumerate(target.params[:6])}
     ours = jax.jit(predict_blocks)(v, target)

@@ -13,13 +13,13 @@ import pytest
 from bench_data_helpers import folder_fingerprint
 
 import idtool
-import idtool._dataset_write
+import idtool._data._write
 from idtool import BenchParams, load_bench_params, load_dataset, simulate_bench, write_simulation
-from idtool._bench import TraceTiming, dahl_at_load, mean_force_n, on_friction_ratio
-from idtool._cli import main
-from idtool._coupling import PowerLimitedCoupling
+from idtool._cli._main import main
+from idtool._data._example import EXAMPLE_SEED, example_params_path
 from idtool._errors import IdtoolError
-from idtool._example import EXAMPLE_SEED, example_params_path
+from idtool._model._bench import TraceTiming, dahl_at_load, mean_force_n, on_friction_ratio
+from idtool._model._coupling import PowerLimitedCoupling
 
 SEED = 7
 
@@ -205,13 +205,13 @@ def test_existing_output_needs_force(tmp_path, capsys):
 
 def test_failed_write_leaves_no_half_written_folder(tmp_path, monkeypatch, simulated):
     dataset, truth = simulated
-    real_write = idtool._dataset_write.write_files
+    real_write = idtool._data._write.write_files
 
     def write_then_fail(folder: Path, files) -> None:
         real_write(folder, dict(list(files.items())[:1]))
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(idtool._dataset_write, "write_files", write_then_fail)
+    monkeypatch.setattr(idtool._data._write, "write_files", write_then_fail)
     with pytest.raises(OSError):
         write_simulation(tmp_path / "new", dataset, truth)
     assert sorted(p.name for p in tmp_path.iterdir()) == []

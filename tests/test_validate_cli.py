@@ -18,7 +18,7 @@ from bench_data_helpers import (
 )
 
 import idtool
-from idtool._cli import main
+from idtool._cli._main import main
 
 
 def _console_script() -> str:

@@ -1,0 +1,77 @@
+"""``idtool fit DATASET --out fits/NAME``: identify Kt, mu and the coupling."""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from idtool._atomic import refuse_existing
+
+__all__ = ["register"]
+
+
+def _run(args: argparse.Namespace) -> int:
+    import idtool
+
+    started = time.perf_counter()
+    refuse_existing(args.out, args.force)  # before minutes of fitting, not after
+    dataset = idtool.load_dataset(Path(args.dataset))
+    for w in dataset.warnings:
+        print(f"idtool fit: {w}")
+    fit = idtool.fit(
+        dataset,
+        law=args.law,
+        coupling=args.coupling,
+        noise=args.noise,
+        seed=args.seed,
+        starts=args.starts,
+        compare_laws=args.compare_laws,
+        profile=args.profile,
+        mains_hz=args.mains_hz,
+    )
+    fit.save(args.out, force=args.force, command=args.argv)
+    print(fit.report())
+    print(
+        f"wrote {args.out}/ (fit.json, report.txt, traces.png, residuals.png) in "
+        f"{time.perf_counter() - started:.1f} s"
+    )
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from idtool import COUPLINGS, FRICTION_LAWS, NOISE_MODELS
+    from idtool._model._noise import DEFAULT_NOISE
+
+    fittable = [n for n in FRICTION_LAWS if FRICTION_LAWS.get(n).fit_params]
+    p = sub.add_parser(
+        "fit",
+        help="fit Kt, mu and the coupling to a dataset",
+        description="Joint least-squares fit of the bench model to every trace of a v1 "
+        "dataset (multi-start Levenberg-Marquardt, AR(1) noise, Gauss-Newton intervals).",
+    )
+    p.add_argument("dataset", help="dataset folder (or its dataset.json)")
+    p.add_argument("--out", required=True, help="output folder, e.g. fits/NAME")
+    p.add_argument("--law", choices=fittable, default="dahl", help="friction law (default dahl)")
+    p.add_argument(
+        "--coupling",
+        choices=(*COUPLINGS.names(), "auto"),
+        default="power-limited",
+        help="coupling law (default power-limited, the paper's finding); auto fits every "
+        "coupling law and keeps the lowest BIC",
+    )
+    p.add_argument(
+        "--noise",
+        choices=NOISE_MODELS.names(),
+        default=DEFAULT_NOISE,
+        help=f"noise model of the block means (default {DEFAULT_NOISE})",
+    )
+    p.add_argument("--compare-laws", action="store_true", help="also fit and rank LuGre/Dahl")
+    p.add_argument(
+        "--profile", action="store_true", help="profile likelihood of each physical parameter"
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the multi-start points")
+    p.add_argument("--starts", type=int, default=8, help="multi-start points (default 8)")
+    p.add_argument("--mains-hz", type=float, default=50.0, help="mains frequency (50 or 60)")
+    p.add_argument("--force", action="store_true", help="replace an existing --out")
+    p.set_defaults(func=_run)

@@ -1,0 +1,88 @@
+"""The ``idtool`` command line: a thin layer over the Python API.
+
+Each sub-command lives in its own ``_cmd_*.py`` module exposing ``register(sub)``, which
+adds its parser and sets ``func(args) -> int``. Bad input raises :class:`IdtoolError`,
+printed here without a traceback, with exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from idtool._errors import IdtoolError
+from idtool._version import __version__
+
+_COMMANDS = (
+    "_curve",
+    "_seed_study",
+    "_validate",
+    "_simulate_bench",
+    "_fit",
+    "_sample",
+    "_predict",
+    "_report",
+    "_demo",
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every sub-command registered."""
+    import importlib
+
+    parser = argparse.ArgumentParser(
+        prog="idtool",
+        description="Identify friction-model parameters of ultrasonically lubricated "
+        "contacts from bench load-cell traces.",
+    )
+    parser.add_argument("--version", action="version", version=f"idtool {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in _COMMANDS:
+        importlib.import_module(f"idtool._cli.{name}").register(sub)
+    return parser
+
+
+def _enable_compilation_cache() -> None:
+    """Keep compiled XLA programs on disk so a repeated command skips compilation.
+
+    Compilation is most of the time to a first result of a short command. The cache
+    lives in ``$IDTOOL_CACHE_DIR`` (default ``~/.cache/idtool/jax``); set it to an empty
+    string to disable it.
+    """
+    import os
+
+    import jax
+
+    path = os.environ.get("IDTOOL_CACHE_DIR", os.path.expanduser("~/.cache/idtool/jax"))
+    if path:
+        jax.config.update("jax_compilation_cache_dir", path)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.05)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``idtool`` console script; returns the exit status."""
+    _enable_compilation_cache()
+    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = parser.parse_args(argv)
+    args.argv = argv  # recorded in every output's provenance
+    try:
+        return int(args.func(args) or 0)
+    except IdtoolError as err:
+        print(f"idtool {args.command}: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"idtool {args.command}: interrupted; nothing was written", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        # The reader went away (``idtool ... | head``): not an error of ours. Point
+        # stdout at devnull so the interpreter's final flush does not complain.
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

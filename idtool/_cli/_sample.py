@@ -1,0 +1,99 @@
+"""``idtool sample fits/NAME``: posterior of a fit with emcee, diagnostics, PPC."""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from idtool._errors import IdtoolError
+
+__all__ = ["register"]
+
+
+def _run(args: argparse.Namespace) -> int:
+    import idtool
+    from idtool._posterior._sample import CHAIN_FILE
+    from idtool._report._sample_text import POSTERIOR_FILES
+
+    started = time.perf_counter()
+    folder = Path(args.fit)
+    fit = idtool.load_fit(folder)
+    chain = folder / CHAIN_FILE
+    if chain.exists() and not (args.resume or args.force):
+        raise IdtoolError(f"{chain} exists: pass --resume to continue it or --force to start over")
+    if args.checkpoint_s < 0:
+        raise IdtoolError(f"--checkpoint-s {args.checkpoint_s:g}: give a number >= 0")
+    if args.resume and not chain.exists():
+        print(f"idtool sample: no {chain} to resume; starting a new chain")
+    if args.force and not args.resume:
+        for name in POSTERIOR_FILES:  # a new chain: no output of the old one may survive
+            (folder / name).unlink(missing_ok=True)
+    try:
+        fit.sample(
+            walkers=args.walkers,
+            steps=args.steps,
+            seed=args.seed,
+            noise=args.noise,
+            priors=args.priors,
+            chain_path=chain,
+            resume=args.resume,
+            progress=not args.no_progress,
+            checkpoint_s=args.checkpoint_s,
+        )
+    except KeyboardInterrupt:
+        saved = f"the steps done so far are in {chain}" if chain.exists() else "nothing saved"
+        print(f"idtool sample: interrupted; {saved}; continue with --resume", flush=True)
+        return 130
+    report = fit.save_posterior(command=args.argv)
+    print(report)
+    print(
+        f"wrote {folder}/ ({', '.join(POSTERIOR_FILES)}) in {time.perf_counter() - started:.1f} s"
+    )
+    return 0
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value}: give a positive integer")
+    return value
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from idtool._model._noise import NOISE_MODELS
+
+    p = sub.add_parser(
+        "sample",
+        help="sample the posterior of a fit with emcee",
+        description="Posterior of a fit's physical, bench and noise parameters with emcee "
+        "(per-trace nuisances integrated out), checkpointed to fits/NAME/chain.h5; writes "
+        "posterior.nc (ArviZ InferenceData), sample.json, report_sample.txt and ppc.png.",
+    )
+    p.add_argument("fit", help="fit folder written by 'idtool fit', e.g. fits/NAME")
+    p.add_argument("--walkers", type=_positive_int, help="walkers (default 32)")
+    p.add_argument(
+        "--steps", type=_positive_int, default=3000, help="total chain length (default 3000)"
+    )
+    p.add_argument("--seed", type=int, help="random seed (default 0)")
+    p.add_argument("--resume", action="store_true", help="continue chain.h5 up to --steps in total")
+    p.add_argument("--force", action="store_true", help="discard an existing chain.h5")
+    p.add_argument(
+        "--noise",
+        choices=NOISE_MODELS.names(),
+        default=None,
+        help="noise model of the block means (default: the fit's, ar1 unless told; "
+        "load-cell noise is correlated, independent noise gives falsely tight posteriors)",
+    )
+    p.add_argument("--priors", help="TOML or JSON file overriding default priors")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--checkpoint-s",
+        type=float,
+        default=20.0,
+        help="seconds between checkpoints of chain.h5 (default 20)",
+    )
+    p.set_defaults(func=_run)

@@ -1,0 +1,281 @@
+"""Levenberg-Marquardt for block-structured least squares, with a coloured Jacobian.
+
+A bench fit has a few shared parameters (Kt, mu, the coupling, the actuator slopes) and
+a few nuisances per trace (offset, pull start, horn lags), and each trace's residuals
+depend on its own nuisances only. The Jacobian is then block-arrow shaped: of its ~100
+columns, the per-trace ones touch disjoint rows. Columns that never share a row can be
+given one colour and probed by a single forward-mode product (Curtis, Powell and Reid
+1974), so a Jacobian costs ``n_shared + n_slots`` JVPs (10 on the example) instead of
+one per parameter (102); :meth:`idtool._model._benchmodel.FitModel.normal_equations` goes to 8 by
+differentiating the bench model in its per-trace levels. optimistix's
+LevenbergMarquardt builds the dense Jacobian column by column (about 14x the work per
+step here, benchmarks/bench_fit.py); this module keeps the classical algorithm
+(Moré-scaled damping, Nielsen's update of the damping) around the coloured Jacobian.
+
+The normal equations ``J^T J`` and ``J^T r`` are assembled from per-trace sums of the
+coloured columns, never from the dense Jacobian. Everything is pure JAX and jittable;
+the loop is a ``lax.while_loop``, so one compiled program serves every start, mask and
+AR(1) coefficient.
+
+References: K. Madsen, H. B. Nielsen, O. Tingleff, *Methods for non-linear least squares
+problems* (2004), Algorithm 3.16; J. J. Moré, *The Levenberg-Marquardt algorithm:
+implementation and theory* (1978).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float, Int
+
+__all__ = [
+    "ColouredJacobian",
+    "LMResult",
+    "coloured_equations",
+    "levenberg_marquardt",
+    "normal_equations",
+]
+
+
+class ColouredJacobian(eqx.Module):
+    """Sparsity of a residual function's Jacobian: rows in groups, columns in colours.
+
+    Attributes:
+        seeds: (c, p) 0/1 tangents, one per colour.
+        colour: (p,) colour of each parameter.
+        active: (m, p) 1 where parameter p can move the residuals of row group m.
+        row_group: (n,) group of each residual row.
+    """
+
+    seeds: Float[np.ndarray, "c p"]
+    colour: Int[np.ndarray, " p"]
+    active: Float[np.ndarray, "m p"]
+    row_group: Int[np.ndarray, " n"]
+    n_groups: int = eqx.field(static=True)
+
+    @classmethod
+    def from_groups(cls, param_group: np.ndarray, row_group: np.ndarray) -> ColouredJacobian:
+        """Structure where parameter j moves every row (``param_group[j] == -1``, shared)
+        or only the rows of its group ``param_group[j]``.
+
+        Shared parameters get a colour each; the k-th parameter of every group shares
+        colour ``n_shared + k``, so every group must list its parameters in the same
+        order (as :class:`idtool._model._benchmodel.FitModel` does).
+        """
+        param_group = np.asarray(param_group, int)
+        row_group = np.asarray(row_group, int)
+        n_groups = int(row_group.max()) + 1
+        colour = np.empty(param_group.size, int)
+        shared = param_group < 0
+        colour[shared] = np.arange(int(shared.sum()))
+        rank = np.zeros(n_groups, int)
+        for j in np.flatnonzero(~shared):
+            g = param_group[j]
+            colour[j] = int(shared.sum()) + rank[g]
+            rank[g] += 1
+        n_colours = int(colour.max()) + 1
+        active = np.where(
+            shared[None, :], 1.0, param_group[None, :] == np.arange(n_groups)[:, None]
+        )
+        seeds = (colour[None, :] == np.arange(n_colours)[:, None]).astype(float)
+        # NumPy, not JAX, arrays: the structure may first be built inside a trace (a
+        # cached property), and it must not capture that trace's values.
+        return cls(
+            seeds=seeds,
+            colour=colour,
+            active=active.astype(float),
+            row_group=row_group,
+            n_groups=n_groups,
+        )
+
+
+def normal_equations(
+    fn: Callable[[Array], Array], z: Float[Array, " p"], structure: ColouredJacobian
+) -> tuple[Float[Array, " n"], Float[Array, "p p"], Float[Array, " p"]]:
+    """Residuals ``r``, ``J^T J`` and ``J^T r`` at ``z`` from one JVP per colour."""
+    r, lin = jax.linearize(fn, z)
+    c = jax.vmap(lin)(structure.seeds).T  # (n, colours): coloured columns
+    g = structure.row_group
+    cc = jax.ops.segment_sum(c[:, :, None] * c[:, None, :], g, structure.n_groups)
+    cr = jax.ops.segment_sum(c * r[:, None], g, structure.n_groups)
+    col = structure.colour
+    act = structure.active
+    jtj = jnp.einsum("mp,mq,mpq->pq", act, act, cc[:, col][:, :, col])
+    jtr = jnp.einsum("mp,mp->p", act, cr[:, col])
+    return r, jtj, jtr
+
+
+class LMResult(eqx.Module):
+    """Outcome of :func:`levenberg_marquardt`.
+
+    ``residuals`` are the residuals at ``z``; ``aux`` what ``equations`` returned
+    beside the normal equations there; ``jtj`` and ``jtr`` the normal equations at
+    ``z`` (masked parameters included), ready for a Gauss-Newton covariance.
+    ``steps`` counts trial steps (accepted or not), ``n_jacobians`` linearisations
+    (each the residuals and one JVP per colour): the start point and every trial.
+    """
+
+    z: Float[Array, " p"]
+    loss: Float[Array, ""]
+    residuals: Float[Array, " n"]
+    aux: Any
+    jtj: Float[Array, "p p"]
+    jtr: Float[Array, " p"]
+    steps: Int[Array, ""]
+    n_jacobians: Int[Array, ""]
+    converged: Bool[Array, ""]
+
+
+def _masked(jtj, jtr, mask):
+    """Freeze parameters outside ``mask``: identity rows in ``J^T J``, zero gradient."""
+    both = mask[:, None] & mask[None, :]
+    eye = jnp.eye(mask.size)
+    return jnp.where(both, jtj, jnp.where(mask[:, None] | mask[None, :], 0.0, eye)), jnp.where(
+        mask, jtr, 0.0
+    )
+
+
+def coloured_equations(
+    fn: Callable[[Array, Any], Array], structure: ColouredJacobian
+) -> Callable[[Array, Any], tuple[Array, Array, Array, tuple]]:
+    """The ``equations`` of :func:`levenberg_marquardt` for residuals ``fn(z, args)``
+    with the sparsity ``structure``: :func:`normal_equations`, no auxiliary output."""
+
+    def equations(z, args):
+        return (*normal_equations(lambda y: fn(y, args), z, structure), ())
+
+    return equations
+
+
+def levenberg_marquardt(
+    equations: Callable[[Array, Any], tuple[Array, Array, Array, Any]],
+    z0: Float[Array, " p"],
+    args: Any,
+    mask: Bool[Array, " p"],
+    max_steps: int | Array = 100,
+    tol: float = 1e-8,
+    max_step: float = 5.0,
+) -> LMResult:
+    """Minimise ``0.5 |r(z)|^2`` over the parameters in ``mask``.
+
+    ``equations(z, args) -> (r, J^T J, J^T r, aux)`` linearises the residuals at ``z``
+    (:func:`coloured_equations` builds it from a residual function and its sparsity);
+    ``aux`` (any pytree it computes on the way) is returned for the final ``z``.
+
+    Convergence: the Gauss-Newton decrement ``g^T (J^T J)^-1 g`` (twice the decrease a
+    full Gauss-Newton step still promises) falls below ``tol`` times the residual
+    variance ``|r|^2 / n``: the optimum is then within ``sqrt(tol)`` standard errors in
+    every direction, whatever the parameters' scales and correlations. Stops early
+    after ``max_steps`` iterations (a traced value: no recompilation) or if the damping
+    explodes (no downhill step exists in floating point).
+
+    No step moves a parameter by more than ``max_step`` on the internal scale.
+    """
+    z0 = jnp.asarray(z0, float)
+    p = z0.size
+
+    def linearise(z):
+        r, jtj, jtr, aux = equations(z, args)
+        return (r, jtj, jtr, *_masked(jtj, jtr, mask), aux)
+
+    def converged(a, g, loss, n):
+        # Jitter keeps a rank-deficient J^T J solvable; it only affects flat directions.
+        jitter = 1e-12 * jnp.max(jnp.diag(a)) * jnp.eye(p)
+        gn = jnp.linalg.solve(a + jitter, g)
+        return jnp.dot(g, gn) <= tol * 2.0 * loss / n
+
+    # Every iteration linearises at the trial point, whether or not it is then accepted:
+    # the model appears once in the compiled loop (compile time is most of the time to a
+    # first fit), at the price of a wasted Jacobian per rejected step (about 1 in 10).
+    shapes = jax.eval_shape(linearise, z0)
+    n = shapes[0].shape[0]
+    state = dict(
+        aux=jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), shapes[-1]),
+        z=z0,
+        loss=jnp.asarray(jnp.inf),
+        r=jnp.zeros(n),
+        jtj=jnp.zeros((p, p)),
+        jtr=jnp.zeros(p),
+        a=jnp.eye(p),
+        g=jnp.zeros(p),
+        trial=z0,
+        predicted=jnp.asarray(1.0),
+        first=jnp.asarray(True),
+        damping=jnp.asarray(1e-3),  # relative to each curvature (Moré scaling below)
+        nu=jnp.asarray(2.0),
+        scale=jnp.zeros(p),
+        steps=jnp.asarray(0),
+        n_jac=jnp.asarray(0),
+        done=jnp.asarray(False),
+        failed=jnp.asarray(False),
+    )
+
+    def cond(s):
+        return s["first"] | (~s["done"] & ~s["failed"] & (s["steps"] < max_steps))
+
+    def body(s):
+        r, jtj, jtr, a, g, aux = linearise(s["trial"])
+        loss_new = 0.5 * jnp.dot(r, r)
+        gain = (s["loss"] - loss_new) / jnp.maximum(s["predicted"], 1e-300)
+        accept = s["first"] | (jnp.isfinite(loss_new) & (gain > 0.0))
+
+        def pick(new, old):
+            return jnp.where(accept, new, old)
+
+        z, loss, r = pick(s["trial"], s["z"]), pick(loss_new, s["loss"]), pick(r, s["r"])
+        jtj, jtr, a, g = pick(jtj, s["jtj"]), pick(jtr, s["jtr"]), pick(a, s["a"]), pick(g, s["g"])
+        aux = jax.tree.map(pick, aux, s["aux"])
+        shrink = jnp.where(s["first"], 1.0, jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3))
+        damping = jnp.where(accept, s["damping"] * shrink, s["damping"] * s["nu"])
+        nu = jnp.where(accept, 2.0, 2.0 * s["nu"])
+
+        # The next trial step. Moré's scaling: damp each parameter in proportion to
+        # the largest curvature it has shown so far. A running maximum, so that a
+        # direction that turns flat (a bounded parameter saturating) cannot take an
+        # unbounded step.
+        scale = jnp.maximum(s["scale"], jnp.diag(a))
+        scale = jnp.maximum(scale, 1e-12 * jnp.max(scale))
+        h = jnp.linalg.solve(a + damping * jnp.diag(scale), -g)
+        h = jnp.where(mask, h, 0.0)
+        # The internal scale is of order one (a bounded parameter spans its range
+        # within |z| < 10): a longer step only happens along a direction gone flat,
+        # which the damping cannot hold, so it is cut back.
+        h = h * jnp.minimum(1.0, max_step / jnp.maximum(jnp.max(jnp.abs(h)), 1e-300))
+        return dict(
+            aux=aux,
+            z=z,
+            loss=loss,
+            r=r,
+            jtj=jtj,
+            jtr=jtr,
+            a=a,
+            g=g,
+            trial=z + h,
+            predicted=-jnp.dot(g, h) - 0.5 * jnp.dot(h, a @ h),
+            first=jnp.asarray(False),
+            damping=damping,
+            nu=nu,
+            scale=scale,
+            steps=s["steps"] + jnp.where(s["first"], 0, 1),
+            n_jac=s["n_jac"] + 1,
+            done=accept & converged(a, g, loss, r.size),
+            failed=~(damping < 1e30),
+        )
+
+    s = jax.lax.while_loop(cond, body, state)
+    return LMResult(
+        z=s["z"],
+        loss=s["loss"],
+        residuals=s["r"],
+        aux=s["aux"],
+        jtj=s["jtj"],
+        jtr=s["jtr"],
+        steps=s["steps"],
+        n_jacobians=s["n_jac"],
+        converged=s["done"],
+    )

@@ -1,0 +1,308 @@
+"""The bench model of a dataset: one model for the fit, the sampler and the checks.
+
+A :class:`BenchModel` is an ``eqx.Module``: the block-averaged traces
+(:class:`~idtool._data._blocks.FitData`) are its leaves, so one compiled program serves
+every dataset of the same shape; the friction law, the coupling law and the noise model
+are static types, each declaring its own parameters (``fit_params``, ``params``) and
+registered by name (:data:`FRICTION_LAWS`, :data:`COUPLINGS`, :data:`NOISE_MODELS`).
+
+Parameters, in the order of the internal vector ``z``:
+
+* shared physical ones: the law's (``Kt``; LuGre adds ``static_ratio`` and
+  ``stribeck_velocity_m_s``), ``mu``, the coupling's (``coupling_gain``, and
+  ``power_load_n`` [N] for the power-limited law);
+* shared bench ones: the actuator-limited ``slope_n_s`` and ``startup_slope_n_s`` [N/s];
+* per trace (:data:`TRACE_GROUPS`): the load-cell offset [N] (it drifts between pulls;
+  the baseline before each pull measures it), the pull start [s], and the lag of the
+  horn behind the logged ON flag at switch-on and at switch-off [s].
+
+Every parameter lives on an unbounded internal scale (:mod:`idtool._model._params`).
+The noise parameters are not in ``z``: the fit estimates phi from its residuals, the
+sampler adds the noise model's ``params`` after the shared ones.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from idtool._data._blocks import FitData, start_values
+from idtool._fit._lm import ColouredJacobian, normal_equations
+from idtool._model._bench import TraceTiming, mean_force_n, on_friction_ratio
+from idtool._model._coupling import COUPLINGS, AbstractCoupling
+from idtool._model._laws import FRICTION_LAWS, MU, AbstractFrictionLaw
+from idtool._model._noise import DEFAULT_NOISE, NOISE_MODELS, AbstractNoise, whiten
+from idtool._model._params import Param
+
+__all__ = ["BENCH_PARAMS", "CORNER_N", "TRACE_GROUPS", "BenchModel", "bench_model"]
+
+CORNER_N = 0.5  # rounding of the trace's corners [N]; fixed, not identifiable
+
+# Per-trace nuisances: name, unit, internal scale. The horn's lag behind the logged flag
+# differs at switch-on and switch-off (each is its own relay and ramp-up), and a single
+# lag leaves a visible bump in the residuals after OFF.
+TRACE_GROUPS = (
+    ("offset_n", "N", 1.0),
+    ("pull_start_s", "s", 0.05),
+    ("delay_on_s", "s", 0.01),
+    ("delay_off_s", "s", 0.01),
+)
+
+BENCH_PARAMS = (
+    Param("slope_n_s", "N/s", "log", 1.0, 1e5, start=100.0, description="actuator slope"),
+    Param("startup_slope_n_s", "N/s", "log", 1.0, 1e5, start=100.0, description="start-up slope"),
+)
+
+
+class BenchModel(eqx.Module):
+    """The model of one dataset for one friction law, coupling law and noise model.
+
+    Build it with :func:`bench_model`. Pure and jittable: pass it to ``jax.jit``-ed
+    functions as an argument.
+    """
+
+    data: FitData
+    nuisance_centre: Float[Array, "groups traces"]  # data-driven start of each nuisance
+    start_z: Float[Array, " shared"]  # data-driven internal start of the shared ones
+    level_structure: ColouredJacobian  # sparsity in (OFF, ON levels, z[k:]): 8 colours
+    law: type[AbstractFrictionLaw] = eqx.field(static=True)
+    coupling: type[AbstractCoupling] = eqx.field(static=True)
+    noise: AbstractNoise = eqx.field(static=True)
+
+    # ------------------------------------------------------------------ parameters
+    @property
+    def shared_params(self) -> tuple[Param, ...]:
+        """Shared parameters, physical first (module docstring)."""
+        return (*self.law.fit_params, MU, *self.coupling.fit_params, *BENCH_PARAMS)
+
+    @property
+    def params(self) -> tuple[Param, ...]:
+        """Every parameter of ``z``: the shared ones, then each nuisance group's per
+        trace (``offset_n[trace_id]``, ...). Outside a trace only (reads the centres)."""
+        centre = np.asarray(self.nuisance_centre)
+        out = list(self.shared_params)
+        for j, (group, unit, scale) in enumerate(TRACE_GROUPS):
+            out += [
+                Param(f"{group}[{tid}]", unit, "linear", centre=float(centre[j, i]), scale=scale)
+                for i, tid in enumerate(self.data.trace_ids)
+            ]
+        return tuple(out)
+
+    @property
+    def n_shared(self) -> int:
+        """Number of shared (not per-trace) parameters; they come first in ``z``."""
+        return len(self.shared_params)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        shared = tuple(p.name for p in self.shared_params)
+        return shared + tuple(
+            f"{group}[{tid}]" for group, _, _ in TRACE_GROUPS for tid in self.data.trace_ids
+        )
+
+    @property
+    def physical_names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.shared_params if p.physical)
+
+    @property
+    def n_physical(self) -> int:
+        return len(self.physical_names)
+
+    @property
+    def param_group(self) -> np.ndarray:
+        """Per parameter: -1 if shared, else the trace whose residuals it alone moves."""
+        n = self.data.n_traces
+        return np.concatenate(
+            [np.full(self.n_shared, -1), np.tile(np.arange(n), len(TRACE_GROUPS))]
+        )
+
+    def values(self, z: Float[Array, " p"]) -> dict[str, Array]:
+        """Physical values: shared names map to scalars, per-trace groups to arrays."""
+        k, n = self.n_shared, self.data.n_traces
+        out = {p.name: p.value(z[i]) for i, p in enumerate(self.shared_params)}
+        for j, (group, _, scale) in enumerate(TRACE_GROUPS):
+            out[group] = self.nuisance_centre[j] + scale * z[k + j * n : k + (j + 1) * n]
+        return out
+
+    def z0(self, **physical: float) -> np.ndarray:
+        """Internal start vector: the data-driven start values, ``physical`` overrides
+        (by name, physical units); the nuisances at their centres."""
+        z = np.zeros(self.n_shared + len(TRACE_GROUPS) * self.data.n_traces)
+        z[: self.n_shared] = np.asarray(self.start_z)
+        for i, p in enumerate(self.shared_params):
+            if p.name in physical:
+                z[i] = p.internal(physical[p.name])
+        return z
+
+    # ------------------------------------------------------------------ physics
+    def law_at(self, v: Mapping[str, Array], normal_load_n) -> AbstractFrictionLaw:
+        """The friction law under ``normal_load_n`` [N] (``Fc = mu N``)."""
+        return self.law.at_load(v, normal_load_n)
+
+    def coupling_of(self, v: Mapping[str, Array]) -> AbstractCoupling:
+        return self.coupling.from_values(v)
+
+    def friction_ratios(self, v: Mapping[str, Array], load_n, alpha, speed_m_s) -> Array:
+        """FR at operating points (arrays of equal shape) from physical values ``v``
+        (notes §3, §5): the cycle-averaged contact at the coupling's slip amplitude."""
+        coupling = self.coupling_of(v)
+        d = self.data
+
+        def one(n, a, s):
+            law = self.law_at(v, n)
+            return on_friction_ratio(
+                law, coupling, n, a, s, d.vibration_frequency_hz, d.max_amplitude_m
+            )
+
+        shape = jnp.shape(load_n)
+        flat = (jnp.ravel(load_n), jnp.ravel(alpha), jnp.ravel(speed_m_s))
+        return jax.vmap(one)(*flat).reshape(shape)
+
+    def levels(self, v: Mapping[str, Array]) -> tuple[Array, Array, Array]:
+        """Per trace: OFF level [N], ON level [N] and friction ratio. FR is solved once
+        per distinct operating point and gathered."""
+        d = self.data
+        fr = self.friction_ratios(v, d.op_load_n, d.op_alpha, d.op_speed_m_s)[d.op_index]
+        off = jax.vmap(lambda n, s: self.law_at(v, n).off_force_n(s))(
+            jnp.asarray(d.normal_load_n), jnp.asarray(d.pull_speed_m_s)
+        )
+        return off, fr * off, fr
+
+    def block_means(self, off_n: Array, on_n: Array, v: Mapping[str, Array]) -> Array:
+        """Block-mean load-cell force [N] from per-trace OFF and ON levels.
+
+        ``off_n`` and ``on_n`` are (traces, *batch); the per-trace nuisances in ``v``
+        are (traces,) or (traces, *batch), the slopes () or (*batch). A batch (the
+        sampler's walkers) is the last, fastest axis: every model point's time and
+        nuisances are then read once for all walkers, 2.6x faster than a vmap.
+        """
+        d = self.data
+        off_n, on_n = jnp.asarray(off_n), jnp.asarray(on_n)
+        extra = off_n.ndim - 1
+
+        def per_block(x):  # (traces, *b) -> (blocks, 1, *b)
+            x = jnp.asarray(x)
+            x = x.reshape(x.shape + (1,) * (1 + extra - x.ndim))
+            return x[d.block_trace][:, None]
+
+        timing = TraceTiming(
+            startup_s=per_block(v["pull_start_s"]),
+            on_start_s=per_block(_add_trailing(d.on_start_s, v["delay_on_s"], extra)),
+            on_end_s=per_block(_add_trailing(d.on_end_s, v["delay_off_s"], extra)),
+        )
+        t = jnp.asarray(d.sub_time_s).reshape(d.sub_time_s.shape + (1,) * extra)
+        force = mean_force_n(
+            t,
+            per_block(off_n),
+            per_block(on_n),
+            timing,
+            v["slope_n_s"],
+            v["startup_slope_n_s"],
+            per_block(v["offset_n"]),
+            CORNER_N,
+        )
+        return force.mean(axis=1)
+
+    def predict(self, z: Float[Array, " p"]) -> Float[Array, " blocks"]:
+        """Block-mean load-cell force [N] for every block of every trace."""
+        v = self.values(z)
+        off, on, _ = self.levels(v)
+        return self.block_means(off, on, v)
+
+    def residuals(self, z: Float[Array, " p"], phi: float | Array = 0.0) -> Array:
+        """AR(1)-whitened residuals (:func:`idtool._model._noise.whiten`) of the model."""
+        return whiten(self.predict(z) - self.data.force_n, jnp.asarray(self.data.first), phi)
+
+    def normal_equations(
+        self, z: Float[Array, " p"], phi: float | Array
+    ) -> tuple[Array, Array, Array, tuple[Array, Array]]:
+        """Whitened residuals ``r``, ``J^T J`` and ``J^T r`` at ``z``; and the levels
+        ``(OFF, ON)`` [N] (2 n_traces) with their Jacobian in the physical parameters.
+
+        The physical parameters reach the traces only through the per-trace OFF and ON
+        levels, so the Jacobian is taken in the bench model's inputs ``u = (OFF, ON,
+        z[k:])`` with one JVP per colour of :attr:`level_structure` (8; the contact model
+        stays out of them) and mapped back by the chain rule, ``J = J_u T`` with
+        ``T = du/dz``: the levels' small Jacobian in the physical parameters, the
+        identity for the rest.
+        """
+        k, m = self.n_physical, self.data.n_traces
+        z = jnp.asarray(z)
+
+        def levels(zp):
+            off, on, _ = self.levels(self.values(z.at[:k].set(zp)))
+            return jnp.concatenate([off, on])
+
+        def resid(u):
+            v = self.values(jnp.concatenate([z[:k], u[2 * m :]]))
+            e = self.block_means(u[:m], u[m : 2 * m], v) - self.data.force_n
+            return whiten(e, jnp.asarray(self.data.first), phi)
+
+        # (2 m, k) and (2 m,): the Jacobian and, from the same pass, the levels
+        dlv, lv = jax.jacfwd(lambda zp: (levels(zp),) * 2, has_aux=True)(z[:k])
+        u = jnp.concatenate([lv, z[k:]])
+        r, jtj_u, jtr_u = normal_equations(resid, u, self.level_structure)
+        n_rest = z.size - k
+        t = jnp.block(
+            [[dlv, jnp.zeros((2 * m, n_rest))], [jnp.zeros((n_rest, k)), jnp.eye(n_rest)]]
+        )
+        return r, t.T @ jtj_u @ t, t.T @ jtr_u, (lv, dlv)
+
+
+def _add_trailing(per_trace: ArrayLike, shift: ArrayLike, extra: int) -> Array:
+    """``per_trace + shift`` with ``per_trace`` (traces,) and ``shift`` (traces,) or
+    (traces, *batch): the result carries ``extra`` trailing axes."""
+    a = jnp.asarray(per_trace).reshape((-1,) + (1,) * extra)
+    s = jnp.asarray(shift)
+    return a + s.reshape(s.shape + (1,) * (1 + extra - s.ndim))
+
+
+def bench_model(
+    data: FitData,
+    law: str | type[AbstractFrictionLaw] = "dahl",
+    coupling: str | type[AbstractCoupling] = "power-limited",
+    noise: str | type[AbstractNoise] = DEFAULT_NOISE,
+) -> BenchModel:
+    """The :class:`BenchModel` of prepared ``data``; laws by registered name or class.
+
+    The per-trace nuisances and ``mu`` and the slopes start from values read off the
+    traces (:func:`idtool._data._blocks.start_values`); the other shared parameters
+    from their ``Param.start``.
+    """
+    law_cls = FRICTION_LAWS.get(law)
+    coupling_cls = COUPLINGS.get(coupling)
+    noise_cls = NOISE_MODELS.get(noise)
+    s = start_values(data)
+    shared = (*law_cls.fit_params, MU, *coupling_cls.fit_params, *BENCH_PARAMS)
+    guess = {
+        "mu": s.friction_coefficient,
+        "slope_n_s": s.slope_n_s,
+        "startup_slope_n_s": s.startup_slope_n_s,
+    }
+    start_z = np.array([p.internal(guess.get(p.name, p.start)) for p in shared])
+    n = data.n_traces
+    centres = {"offset_n": s.offset_n, "pull_start_s": s.pull_start_s}
+    nuisance_centre = np.stack([centres.get(g, np.zeros(n)) for g, _, _ in TRACE_GROUPS])
+    k = sum(p.physical for p in shared)
+    groups = np.concatenate(
+        [
+            np.arange(n),
+            np.arange(n),
+            np.full(len(shared) - k, -1),
+            np.tile(np.arange(n), len(TRACE_GROUPS)),
+        ]
+    )
+    return BenchModel(
+        data=data,
+        nuisance_centre=jnp.asarray(nuisance_centre),
+        start_z=jnp.asarray(start_z),
+        level_structure=ColouredJacobian.from_groups(groups, data.block_trace),
+        law=law_cls,
+        coupling=coupling_cls,
+        noise=noise_cls(),
+    )

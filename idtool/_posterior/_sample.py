@@ -1,0 +1,389 @@
+"""Posterior sampling of a fit with emcee (issue 5).
+
+* The log-posterior of :mod:`idtool._posterior._likelihood`, batched over walkers (the contact
+  model vmapped, the bench model with walkers as its fastest axis), is compiled once and
+  handed to ``emcee.EnsembleSampler(vectorize=True)``; emcee evaluates half the
+  ensemble at a time, so every call has the same shape (one compilation).
+* Walkers start from a multivariate normal around the fit's optimum with the fit's
+  covariance (the shared block of ``cov_z``; the noise parameters from their asymptotic
+  errors); the log-posterior must be finite at the optimum and at every start.
+* Seeded: walker starts from ``numpy.random.default_rng(seed)``, emcee's moves from
+  ``RandomState(seed)``; the same seed gives the same chain, bit for bit.
+* Checkpointed (``chain_path``): every ``checkpoint_s`` seconds (and at the end) the
+  steps run so far are appended to ``chain.h5`` atomically (:mod:`idtool._posterior._chainfile`),
+  so ``chain.h5`` is always a complete chain, random state included, that
+  ``resume=True`` continues exactly where it stopped: an interrupted and resumed run
+  gives the same chain as an uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+import os
+import time
+from pathlib import Path
+from typing import Any, Protocol
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from idtool._errors import IdtoolError
+from idtool._model._benchmodel import BenchModel
+from idtool._model._noise import NOISE_MODELS
+from idtool._model._params import Param
+from idtool._posterior._chainfile import (
+    append_segment,
+    last_state,
+    read_chain,
+    read_linearisation,
+    read_settings,
+)
+from idtool._posterior._diagnostics import Diagnostics, diagnose
+from idtool._posterior._likelihood import (
+    Target,
+    build_target,
+    log_posterior_batch,
+    sampled_params,
+)
+from idtool._posterior._prior import Prior, default_prior, parse_priors, read_priors
+from idtool._posterior._start import find_start, initial_walkers
+
+__all__ = ["CHAIN_FILE", "LogPosterior", "Posterior", "sample_posterior"]
+
+CHAIN_FILE = "chain.h5"
+_batched = jax.jit(log_posterior_batch)
+
+
+class FitLike(Protocol):
+    """What sampling needs from a fit (``FitResult`` and ``StoredFit`` both have it)."""
+
+    @property
+    def model(self) -> BenchModel: ...
+    @property
+    def z(self) -> np.ndarray: ...
+    @property
+    def cov_z(self) -> np.ndarray: ...
+    @property
+    def phi(self) -> float: ...
+    @property
+    def sigma_n(self) -> float: ...
+
+
+class LogPosterior:
+    """The batched log-posterior as emcee calls it: ``(n, ndim) -> (n,)`` NumPy arrays.
+
+    Batches are cut (and padded) to ``batch`` rows, so one compiled program serves every
+    call; the first call's compilation time is kept in ``compile_s``.
+    """
+
+    def __init__(self, target: Target, batch: int):
+        self.target = target
+        self.batch = batch
+        self.compile_s: float | None = None
+        self.evaluations = 0
+
+    def __call__(self, theta: np.ndarray) -> np.ndarray:
+        theta = np.atleast_2d(np.asarray(theta, float))
+        n = theta.shape[0]
+        pad = (-n) % self.batch
+        x = np.concatenate([theta, np.repeat(theta[-1:], pad, axis=0)]) if pad else theta
+        out = []
+        for i in range(0, x.shape[0], self.batch):
+            chunk = jnp.asarray(x[i : i + self.batch])
+            if self.compile_s is None:
+                t0 = time.perf_counter()
+                _batched.lower(chunk, self.target).compile()
+                self.compile_s = time.perf_counter() - t0
+            out.append(np.asarray(_batched(chunk, self.target)))
+        self.evaluations += n
+        return np.concatenate(out)[:n]
+
+
+@dataclasses.dataclass(frozen=True)
+class Posterior:
+    """An ensemble chain and what it says.
+
+    ``chain`` (steps, walkers, ndim) is on the internal scale, ``values`` the same in
+    physical units; the first ``diagnostics.burn`` steps are burn-in.
+    """
+
+    params: tuple[Param, ...]
+    chain: np.ndarray
+    values: np.ndarray
+    log_prob: np.ndarray
+    acceptance: np.ndarray
+    diagnostics: Diagnostics
+    noise: str
+    priors: dict[str, Prior]
+    seed: int
+    law: str
+    coupling: str
+    timing: dict[str, float]
+    z_lin: np.ndarray  # BenchModel vector where the nuisances are linearised
+    warnings: tuple[str, ...] = ()
+    model: BenchModel | None = None  # the model sampled (for predictions)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.params)
+
+    def draws(self) -> dict[str, np.ndarray]:
+        """Kept draws (burn-in dropped) of every parameter, flat, physical units."""
+        kept = self.values[self.diagnostics.burn :]
+        return {n: kept[:, :, i].ravel() for i, n in enumerate(self.names)}
+
+    def _model(self) -> BenchModel:
+        if self.model is None:
+            raise IdtoolError("this posterior does not carry its model; predict from the Fit")
+        return self.model
+
+    def predict(self, load_n, amplitude, speed_m_s=None, *, max_draws: int = 2000):
+        """Friction ratio (median, 95% band) over loads [N] x amplitude fractions x
+        speeds [m/s] from the kept draws: :class:`idtool.Predictions`."""
+        from idtool._predict._predict import draws_from_posterior
+        from idtool._predict._tables import predict_table
+
+        draws = draws_from_posterior(self, self._model(), max_draws)
+        return predict_table(draws, self._model().data, load_n, amplitude, speed_m_s)
+
+    def amplitude_for(self, reduction_percent: float, load_n, speed_m_s=None, *, max_draws=2000):
+        """The amplitude fraction for a target reduction [%]: :class:`idtool.Amplitudes`."""
+        from idtool._predict._predict import draws_from_posterior
+        from idtool._predict._tables import amplitude_table
+
+        draws = draws_from_posterior(self, self._model(), max_draws)
+        data = self._model().data
+        return amplitude_table(draws, data, reduction_percent, load_n, speed_m_s)
+
+    def to_arviz(self):
+        """The chain as ArviZ ``InferenceData`` (the content of ``posterior.nc``)."""
+        from idtool._posterior._store import inference_data
+
+        return inference_data(self)
+
+    def summary(self) -> dict[str, dict[str, Any]]:
+        out = {}
+        for p, (name, x) in zip(self.params, self.draws().items(), strict=True):
+            lo, med, hi = np.percentile(x, [2.5, 50.0, 97.5])
+            out[name] = {
+                "median": float(med),
+                "ci95": [float(lo), float(hi)],
+                "mean": float(np.mean(x)),
+                "sd": float(np.std(x)),
+                "unit": p.unit,
+            }
+        return out
+
+
+def _fingerprint(fit: FitLike) -> str:
+    h = hashlib.sha256()
+    for a in (fit.z, fit.cov_z, np.array([fit.phi])):
+        h.update(np.ascontiguousarray(a, dtype=float).tobytes())
+    return h.hexdigest()
+
+
+def _settings(fit: FitLike, params, priors, noise, walkers, seed) -> dict:
+    return {
+        "names": [p.name for p in params],
+        "noise": noise,
+        "priors": {n: p.to_dict() for n, p in priors.items()},
+        "walkers": walkers,
+        "seed": seed,
+        "fit": _fingerprint(fit),
+        "law": fit.model.law.name,
+        "coupling": fit.model.coupling.name,
+    }
+
+
+def _resolve(fit, noise, priors, stored: dict | None):
+    """Noise model and priors: the stored ones on resume, else the given ones or defaults."""
+    if stored is not None:
+        if noise is not None and noise != stored["noise"]:
+            raise IdtoolError(
+                f"the chain was sampled with --noise {stored['noise']}, not {noise}; "
+                "start over without --resume to change it"
+            )
+        noise = stored["noise"]
+    noise = noise or fit.model.noise.name
+    params = sampled_params(dataclasses.replace(fit.model, noise=NOISE_MODELS.get(noise)()))
+    overrides: dict[str, Prior] = {}
+    if isinstance(priors, str | os.PathLike):
+        overrides = read_priors(priors, params)
+    elif priors:
+        raw = {n: p.to_dict() if isinstance(p, Prior) else p for n, p in priors.items()}
+        overrides = parse_priors(raw, params, "priors")
+    table = {p.name: default_prior(p) for p in params} | overrides
+    if stored is not None:
+        stored_table = parse_priors(stored["priors"], params, "chain.h5")
+        if priors and stored_table != table:
+            raise IdtoolError(
+                "the priors differ from those the chain was sampled with; "
+                "start over without --resume to change them"
+            )
+        table = stored_table
+    return noise, params, table
+
+
+def sample_posterior(
+    fit: FitLike,
+    walkers: int | None = None,
+    steps: int = 3000,
+    seed: int | None = None,
+    noise: str | None = None,
+    priors: str | os.PathLike | dict | None = None,
+    chain_path: str | os.PathLike | None = None,
+    resume: bool = False,
+    progress: bool = False,
+    checkpoint_s: float = 20.0,
+) -> Posterior:
+    """Sample the posterior of ``fit``'s shared parameters (module docstring).
+
+    Args:
+        fit: a :class:`~idtool._fit._fit.FitResult` or a stored fit (``idtool._fit._store``).
+        walkers, steps: ensemble size (default 32) and total chain length (a resumed
+            chain is continued up to ``steps``).
+        seed: seeds the walker starts and emcee's moves (default 0; on resume the
+            random state comes from the chain file).
+        noise: a registered noise model (``NOISE_MODELS``; default: the fit's).
+        priors: overrides of the default priors: a TOML/JSON path or a dict.
+        chain_path: checkpoint file (``chain.h5``); ``None`` keeps the chain in memory.
+        resume: continue the chain in ``chain_path``.
+    """
+    import emcee
+
+    chain_file = Path(chain_path) if chain_path is not None else None
+    stored, done = None, 0
+    if resume and chain_file is not None and chain_file.exists():
+        stored, done = read_settings(chain_file)
+    noise, params, table = _resolve(fit, noise, priors, stored)
+    if stored is not None:
+        for name, given in (("walkers", walkers), ("seed", seed)):
+            if given is not None and given != stored[name]:
+                raise IdtoolError(
+                    f"the chain was sampled with --{name} {stored[name]}, not {given}; "
+                    "start over without --resume to change it"
+                )
+        walkers, seed = int(stored["walkers"]), int(stored["seed"])
+        if stored["fit"] != _fingerprint(fit) or stored["names"] != [p.name for p in params]:
+            raise IdtoolError(
+                f"{chain_file}: sampled from another fit; start over without --resume"
+            )
+    walkers = 32 if walkers is None else walkers
+    seed = 0 if seed is None else seed
+    ndim = len(params)
+    if walkers < 2 * ndim + 2 or walkers % 2:
+        raise IdtoolError(
+            f"{walkers} walkers for {ndim} parameters: give an even number above {2 * ndim}"
+        )
+    if steps < 10:
+        raise IdtoolError(f"{steps} steps: give at least 10")
+    started = time.perf_counter()
+    warnings: tuple[str, ...] = ()
+    if done == 0:
+        rebuild = functools.partial(build_target, fit.model, noise=noise, priors=table)
+        start = find_start(fit, rebuild(np.asarray(fit.z)), rebuild)
+        mode_s = time.perf_counter() - started
+        z_lin, warnings = start.z_lin, start.warnings
+        fn = LogPosterior(start.target, walkers // 2)
+        p0 = initial_walkers(start, fn, walkers, np.random.default_rng(seed))
+        initial: Any = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
+    else:
+        assert chain_file is not None
+        z_lin = read_linearisation(chain_file)
+        fn = LogPosterior(build_target(fit.model, z_lin, noise, table), walkers // 2)
+        initial = last_state(chain_file)
+        mode_s = 0.0
+    settings = _settings(fit, params, table, noise, walkers, seed) | {"warnings": list(warnings)}
+    bar = _progress(progress, steps, done)
+    sample_s = 0.0
+    start_done = done
+    segments = []
+    try:
+        while done < steps:
+            backend = emcee.backends.Backend()
+            sampler = emcee.EnsembleSampler(
+                walkers, ndim, fn, vectorize=True, backend=backend, moves=_moves()
+            )
+            t0 = time.perf_counter()
+            it = sampler.sample(initial, iterations=steps - done, skip_initial_state_check=True)
+            for _ in it:
+                done += 1
+                bar.update(1)
+                if chain_file is not None and time.perf_counter() - t0 > checkpoint_s:
+                    break
+            sample_s += time.perf_counter() - t0
+            initial = backend.get_last_sample()
+            if chain_file is None:
+                segments.append(backend)
+            else:
+                new = done - backend.iteration == 0
+                append_segment(chain_file, backend, initial.random_state, settings, new, z_lin)
+    finally:
+        bar.close()
+    if chain_file is not None:
+        chain, lp, acc = read_chain(chain_file)
+    else:
+        chain = np.concatenate([b.get_chain() for b in segments])
+        lp = np.concatenate([b.get_log_prob() for b in segments])
+        acc = sum(b.accepted for b in segments) / done
+    values = np.stack(
+        [np.asarray(p.value(jnp.asarray(chain[:, :, i]))) for i, p in enumerate(params)], axis=-1
+    )
+    diag = diagnose(chain, acc, tuple(p.name for p in params))
+    if stored is not None:
+        warnings = tuple(stored.get("warnings", ()))
+    timing = {
+        "mode_search_s": mode_s,
+        "compile_s": float(fn.compile_s or 0.0),
+        "sampling_s": sample_s,
+        "steps_this_run": float(done - start_done),
+        "total_s": time.perf_counter() - started,
+        "log_posterior_evaluations": float(fn.evaluations),
+    }
+    return Posterior(
+        params=params,
+        chain=chain,
+        values=values,
+        log_prob=lp,
+        acceptance=acc,
+        diagnostics=diag,
+        noise=noise,
+        priors=table,
+        seed=seed,
+        law=fit.model.law.name,
+        coupling=fit.model.coupling.name,
+        timing=timing,
+        z_lin=np.asarray(z_lin),
+        warnings=warnings,
+        model=fit.model,
+    )
+
+
+def _moves():
+    """emcee's differential-evolution move (ter Braak 2006). On this posterior
+    (near-Gaussian, strongly correlated) its autocorrelation times are about a third of
+    the default stretch move's (27 against 81 steps on the example,
+    benchmarks/bench_sample.py); the snooker variant did not help and splits the
+    ensemble in four (smaller, less efficient batches)."""
+    import emcee
+
+    return [(emcee.moves.DEMove(), 1.0)]
+
+
+class _NoBar:
+    def update(self, n: int) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def _progress(enabled: bool, total: int, initial: int):
+    if not enabled:
+        return _NoBar()
+    from tqdm import tqdm
+
+    return tqdm(total=total, initial=initial, unit="step", desc="sampling", dynamic_ncols=True)

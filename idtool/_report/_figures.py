@@ -1,0 +1,176 @@
+"""Figures of the uncertainty report (PNG files; matplotlib is imported here only)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from idtool._predict._predict import Draws, amplitude_for_reduction, predict_friction_ratio
+
+__all__ = [
+    "amplitude_map_figure",
+    "corner_figure",
+    "correlation_figure",
+    "friction_ratio_figures",
+    "walker_figure",
+]
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(plt, fig, path: Path, dpi: int = 90) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return path
+
+
+def correlation_figure(names: list[str], matrix: np.ndarray, path: Path) -> Path:
+    """Heat map of the fit's correlation matrix, values written in the cells."""
+    plt = _plt()
+    n = len(names)
+    fig, ax = plt.subplots(figsize=(1.1 * n + 2, 1.0 * n + 1.5))
+    im = ax.imshow(matrix, vmin=-1, vmax=1, cmap="RdBu_r")
+    ax.set_xticks(range(n), names, rotation=40, ha="right", fontsize=8)
+    ax.set_yticks(range(n), names, fontsize=8)
+    for i in range(n):
+        for j in range(n):
+            ax.text(j, i, f"{matrix[i, j]:+.2f}", ha="center", va="center", fontsize=7)
+    fig.colorbar(im, ax=ax, shrink=0.8)
+    return _save(plt, fig, path)
+
+
+def corner_figure(values: dict[str, np.ndarray], names: list[str], path: Path) -> Path:
+    """Corner plot: 1-D histograms on the diagonal, 2-D scatter below it."""
+    plt = _plt()
+    n = len(names)
+    fig, axes = plt.subplots(n, n, figsize=(2.1 * n, 2.1 * n), squeeze=False)
+    for i, yi in enumerate(names):
+        for j, xj in enumerate(names):
+            ax = axes[i, j]
+            if j > i:
+                ax.axis("off")
+                continue
+            if i == j:
+                ax.hist(values[xj], bins=40, color="C0", alpha=0.8)
+                ax.set_yticks([])
+            else:
+                ax.plot(values[xj], values[yi], ",", alpha=0.3, color="C0")
+            if i == n - 1:
+                ax.set_xlabel(xj, fontsize=8)
+            else:
+                ax.set_xticklabels([])
+            if j == 0 and i > 0:
+                ax.set_ylabel(yi, fontsize=8)
+            ax.tick_params(labelsize=6)
+    return _save(plt, fig, path, dpi=80)
+
+
+def walker_figure(chains: dict[str, np.ndarray], names: list[str], path: Path) -> Path:
+    """Every walker's path per parameter (``chains[name]`` is walkers x steps)."""
+    plt = _plt()
+    fig, axes = plt.subplots(len(names), 1, figsize=(10, 1.5 * len(names)), sharex=True)
+    for ax, name in zip(np.atleast_1d(axes), names, strict=True):
+        ax.plot(chains[name].T, lw=0.3, alpha=0.5, color="k")
+        ax.set_ylabel(name, fontsize=8)
+        ax.tick_params(labelsize=7)
+    np.atleast_1d(axes)[-1].set_xlabel("step (after burn-in)")
+    return _save(plt, fig, path, dpi=80)
+
+
+def friction_ratio_figures(
+    draws: Draws, points: list[dict], speed_m_s: float, out: Path
+) -> tuple[Path, Path]:
+    """FR against amplitude (per load) and against load (per amplitude), median and 95%
+    band, with the data's operating points (the fit's per-trace FR) marked."""
+    plt = _plt()
+    loads = sorted({p["normal_load_n"] for p in points})
+    alphas = sorted({p["amplitude_fraction"] for p in points})
+    amp_grid = np.linspace(0.05, 1.0, 16)
+    load_grid = np.linspace(0.5 * min(loads), 1.5 * max(loads), 16)
+
+    def band(ls, als):
+        preds = predict_friction_ratio(draws, ls, als, [speed_m_s])
+        med = np.array([p.median for p in preds])
+        lo = np.array([p.ci95[0] for p in preds])
+        hi = np.array([p.ci95[1] for p in preds])
+        return med, lo, hi
+
+    def marks(ax, key, value, x_key):
+        sel = [p for p in points if p[key] == value]
+        ax.errorbar(
+            [p[x_key] for p in sel],
+            [p["friction_ratio"]["estimate"] for p in sel],
+            [1.96 * p["friction_ratio"]["std_error"] for p in sel],
+            fmt="o",
+            ms=4,
+            color="k",
+            zorder=3,
+        )
+
+    def panel(groups, x_grid, curve, key, x_key, label, xlabel, title, path):
+        # One curve and band per group (a load, or an amplitude) against x_grid.
+        fig, ax = plt.subplots(figsize=(6, 4))
+        for c, value in enumerate(groups):
+            med, lo, hi = curve(value)
+            ax.fill_between(x_grid, lo, hi, color=f"C{c}", alpha=0.25)
+            ax.plot(x_grid, med, color=f"C{c}", label=label(value))
+            marks(ax, key, value, x_key)
+        ax.set(xlabel=xlabel, ylabel="friction ratio FR", ylim=(0, 1.05))
+        ax.legend(title=title)
+        return _save(plt, fig, path)
+
+    p1 = panel(
+        loads,
+        amp_grid,
+        lambda load: band([load], amp_grid),
+        "normal_load_n",
+        "amplitude_fraction",
+        lambda load: f"{load:g} N",
+        "commanded amplitude fraction",
+        "normal load",
+        out / "fr_vs_amplitude.png",
+    )
+    p2 = panel(
+        alphas,
+        load_grid,
+        lambda alpha: band(load_grid, [alpha]),
+        "amplitude_fraction",
+        "normal_load_n",
+        lambda alpha: f"{100 * alpha:.0f}%",
+        "normal load [N]",
+        "amplitude",
+        out / "fr_vs_load.png",
+    )
+    return p1, p2
+
+
+def amplitude_map_figure(
+    draws: Draws, targets: tuple[float, ...], loads: np.ndarray, speed_m_s: float, path: Path
+) -> tuple[Path, list]:
+    """Amplitude needed for each target reduction against load, median and 95% band;
+    loads where the target is out of reach are left blank and said so."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6, 4))
+    rows = []
+    for c, target in enumerate(targets):
+        res = amplitude_for_reduction(draws, target, loads, [speed_m_s])
+        rows += res
+        med = np.array([r.amplitude[0] if r.reachable else np.nan for r in res])
+        lo = np.array([r.amplitude[1] if r.reachable else np.nan for r in res])
+        # The upper band edge is infinite where some draws cannot reach the target.
+        hi = np.array([min(r.amplitude[2], 1.05) if r.reachable else np.nan for r in res])
+        ax.fill_between(loads, lo, hi, color=f"C{c}", alpha=0.25)
+        ax.plot(loads, med, color=f"C{c}", label=f"{target:g}% reduction")
+    ax.axhline(1.0, color="k", lw=0.8, ls="--")
+    ax.set(xlabel="normal load [N]", ylabel="amplitude fraction needed", ylim=(0, 1.1))
+    ax.legend()
+    return _save(plt, fig, path), rows

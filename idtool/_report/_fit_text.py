@@ -1,0 +1,254 @@
+"""What a fit hands on: ``fit.json``, a report a person can read, residual plots."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from idtool._fit._fit import Estimate, FitResult
+from idtool._fit._run import FitRun
+from idtool._model._benchmodel import TRACE_GROUPS
+from idtool._provenance import provenance
+from idtool._version import __version__
+
+__all__ = ["fit_json", "fit_report", "plot_fit"]
+
+# The model is an argument (its data are leaves): one program per dataset shape.
+_predict = jax.jit(lambda model, z: model.predict(z))
+_residuals = jax.jit(lambda model, z, phi: model.residuals(z, phi))
+
+
+def _est(e: Estimate) -> dict:
+    return {
+        "estimate": e.estimate,
+        "std_error": e.std_error,
+        "ci95": [e.ci95[0], e.ci95[1]],
+        "unit": e.unit,
+        "at_bound": bool(e.at_bound),
+    }
+
+
+def _shared_names(r: FitResult) -> list[str]:
+    return [s.name for s in r.model.shared_params]
+
+
+def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> dict:
+    """The ``fit.json`` document (schema in the README)."""
+    r = run.chosen
+    d = run.data
+    phys = list(r.model.physical_names)
+    shared = _shared_names(r)
+    params = {name: _est(r.estimates[name]) for name in phys}
+    for name, prof in run.profiles.items():
+        params[name]["profile_ci95"] = [prof.ci95[0], prof.ci95[1]]
+    idx = [r.model.names.index(n) for n in shared]
+    traces = []
+    for i, tid in enumerate(d.trace_ids):
+        traces.append(
+            {
+                "id": tid,
+                "normal_load_n": float(d.normal_load_n[i]),
+                "amplitude_fraction": float(d.amplitude_fraction[i]),
+                "pull_speed_m_s": float(d.pull_speed_m_s[i]),
+                "friction_ratio": {
+                    "estimate": float(r.friction_ratio[i]),
+                    "std_error": float(r.friction_ratio_se[i]),
+                },
+                **{key: _est(r.estimates[f"{key}[{tid}]"]) for key, _, _ in TRACE_GROUPS},
+            }
+        )
+    prov = provenance(argv)
+    law, coupling = r.model.law.name, r.model.coupling.name
+    return {
+        "parameters": params,
+        "bench": {name: _est(r.estimates[name]) for name in shared if name not in phys},
+        "traces": traces,
+        "law": law,
+        "coupling": coupling,
+        "aic": r.aic,
+        "bic": r.bic,
+        "loglik": r.loglik,
+        "n_data": r.n_data,
+        "n_params": r.n_params,
+        "noise": {
+            "name": r.model.noise.name,
+            "model": f"{r.model.noise.description} on block means over whole mains periods",
+            "block_s": d.block_s,
+            "mains_hz": d.mains_hz,
+            "phi": r.phi,
+            "sigma_n": r.sigma_n,
+        },
+        "correlation": {"names": shared, "matrix": r.correlation[np.ix_(idx, idx)].tolist()},
+        "model_comparison": [
+            {"model": key, "aic": c.aic, "bic": c.bic, "loglik": c.loglik, "n_params": c.n_params}
+            for key, c in run.ranking
+        ],
+        "choice": run.reason,
+        "multistart": [
+            {
+                "rss": o["rss"],
+                "count": o["count"],
+                "converged": bool(o["converged"]),
+                **{
+                    n: float(r.model.params[j].value(jnp.asarray(o["z"][j])))
+                    for j, n in enumerate(phys)
+                },
+            }
+            for o in r.optima
+        ],
+        "warnings": r.warnings,
+        "lm_steps": r.lm_steps,
+        "jacobian_evaluations": r.jacobian_evaluations,
+        "dataset": {"name": d.name, "sha256": d.sha256, "path": dataset_path},
+        "idtool_version": __version__,
+        "seed": run.seed,
+        "command": prov["command"],
+        "versions": prov["versions"],
+        "created_utc": prov["created_utc"],
+    }
+
+
+def _fmt(e: Estimate) -> str:
+    rel = f"({100 * e.std_error / abs(e.estimate):.2g}%)" if e.estimate else ""
+    flag = "  AT BOUND" if e.at_bound else ""
+    return (
+        f"{e.estimate:12.5g} {e.unit:4s} +/- {e.std_error:9.3g} {rel:9s} "
+        f"[{e.ci95[0]:.5g}, {e.ci95[1]:.5g}]{flag}"
+    )
+
+
+def fit_report(run: FitRun) -> str:
+    """A plain-text report: estimates, intervals, correlations, statistics, warnings."""
+    r, d = run.chosen, run.data
+    lines = [
+        "[[Fit]]",
+        f"    dataset      {d.name} (sha256 {d.sha256[:12]}...), {d.n_traces} traces, "
+        f"{d.n_blocks} block means of {d.block_size} samples",
+        f"    model        {r.model.law.name} friction, {r.model.coupling.name} coupling",
+        f"    choice       {run.reason}",
+        f"    noise        {r.model.noise.description} ({r.model.noise.name}), phi = {r.phi:.3f}, "
+        f"innovation sigma = {r.sigma_n:.3g} N",
+        f"    statistics   log L = {r.loglik:.1f}, AIC = {r.aic:.1f}, BIC = {r.bic:.1f}, "
+        f"{r.n_params} parameters, {r.lm_steps} Levenberg-Marquardt steps",
+        "[[Physical parameters]]  (95% intervals from the Gauss-Newton covariance)",
+    ]
+    for name in r.model.physical_names:
+        lines.append(f"    {name:22s}{_fmt(r.estimates[name])}")
+        if name in run.profiles:
+            lo, hi = run.profiles[name].ci95
+            lines.append(f"    {'':22s}profile likelihood 95%: [{lo:.5g}, {hi:.5g}]")
+    lines.append("[[Bench parameters]]")
+    shared = _shared_names(r)
+    for name in shared:
+        if name not in r.model.physical_names:
+            lines.append(f"    {name:22s}{_fmt(r.estimates[name])}")
+    lines.append("[[Correlations]]  (|r| > 0.3)")
+    idx = [r.model.names.index(n) for n in shared]
+    corr = r.correlation[np.ix_(idx, idx)]
+    pairs = [
+        (abs(corr[a, b]), shared[a], shared[b], corr[a, b])
+        for a in range(len(shared))
+        for b in range(a + 1, len(shared))
+        if abs(corr[a, b]) > 0.3
+    ]
+    lines += [f"    C({a}, {b}) = {c:+.3f}" for _, a, b, c in sorted(pairs, reverse=True)]
+    lines.append("[[Model comparison]]  (ranked by BIC)")
+    best = run.ranking[0][1].bic
+    for key, c in run.ranking:
+        lines.append(
+            f"    {key:24s} AIC {c.aic:10.1f}  BIC {c.bic:10.1f}  dBIC {c.bic - best:7.1f}"
+        )
+    lines.append("[[Friction ratio at each operating point]]")
+    seen = set()
+    for i in range(d.n_traces):
+        op = (d.normal_load_n[i], d.amplitude_fraction[i], d.pull_speed_m_s[i])
+        if op in seen:
+            continue
+        seen.add(op)
+        lines.append(
+            f"    {op[0]:6.0f} N, {100 * op[1]:3.0f}%, {op[2]:.3g} m/s   FR = "
+            f"{r.friction_ratio[i]:.4f} +/- {r.friction_ratio_se[i]:.4f}"
+        )
+    lines.append(
+        "[[Multi-start]]  (each start a short joint fit, RSS at phi = 0; the lowest is then "
+        "taken to convergence)"
+    )
+    for o in r.optima:
+        lines.append(
+            f"    RSS {o['rss']:14.6g}  found {o['count']}x  "
+            f"{'converged' if o['converged'] else 'step budget reached'}"
+        )
+    lines.append("[[Warnings]]")
+    lines += [f"    - {w}" for w in r.warnings] or ["    none"]
+    return "\n".join(lines)
+
+
+def plot_fit(run: FitRun, out_dir: str | Path) -> list[Path]:
+    """``traces.png`` (data and fit), ``residuals.png`` and, if profiled, ``profile.png``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    r, d = run.chosen, run.data
+    out = Path(out_dir)
+    pred = np.asarray(_predict(r.model, jnp.asarray(r.z)))
+    resid = d.force_n - pred
+    cols = 4
+    rows = int(np.ceil(d.n_traces / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(14, 2.2 * rows), sharex=False, squeeze=False)
+    for i, ax in enumerate(axes.flat):
+        if i >= d.n_traces:
+            ax.axis("off")
+            continue
+        sel = d.block_trace == i
+        ax.plot(d.block_time_s[sel], d.force_n[sel], ".", ms=2, color="0.5", label="data")
+        ax.plot(d.block_time_s[sel], pred[sel], "-", lw=1.2, color="C3", label="fit")
+        ax.set_title(d.trace_ids[i], fontsize=8)
+        ax.tick_params(labelsize=7)
+    axes.flat[0].legend(fontsize=7)
+    fig.supxlabel("time [s]")
+    fig.supylabel("force [N] (block means)")
+    fig.tight_layout()
+    paths = [out / "traces.png"]
+    fig.savefig(paths[-1], dpi=90)
+    plt.close(fig)
+
+    w = np.asarray(_residuals(r.model, jnp.asarray(r.z), r.phi))
+    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(14, 3.5))
+    for i in range(d.n_traces):
+        sel = d.block_trace == i
+        a1.plot(d.block_time_s[sel], resid[sel], lw=0.5)
+    a1.set(xlabel="time [s]", ylabel="residual [N]", title="residuals (block means)")
+    lags = np.arange(1, 21)
+    for series, label in ((resid, "raw"), (w, "AR(1)-whitened")):
+        s = series - series.mean()
+        acf = [np.sum(s[k:] * s[:-k]) / np.sum(s * s) for k in lags]
+        a2.plot(lags, acf, marker=".", label=label)
+    a2.axhline(0, color="k", lw=0.5)
+    a2.set(xlabel="lag [blocks]", ylabel="autocorrelation", title="residual autocorrelation")
+    a2.legend()
+    a3.hist(w / r.sigma_n, bins=60, density=True, color="0.6")
+    x = np.linspace(-4, 4, 200)
+    a3.plot(x, np.exp(-(x**2) / 2) / np.sqrt(2 * np.pi), "C3")
+    a3.set(xlabel="whitened residual / sigma", title="whitened residuals vs N(0, 1)")
+    fig.tight_layout()
+    paths.append(out / "residuals.png")
+    fig.savefig(paths[-1], dpi=90)
+    plt.close(fig)
+
+    if run.profiles:
+        n = len(run.profiles)
+        fig, axes = plt.subplots(1, n, figsize=(3.5 * n, 3), squeeze=False)
+        for ax, prof in zip(axes.flat, run.profiles.values(), strict=True):
+            ax.plot(prof.values, prof.delta, marker="o")
+            ax.axhline(3.84, color="C3", ls="--", lw=0.8)
+            ax.set(xlabel=prof.name, ylabel="rise of -2 log L")
+        fig.tight_layout()
+        paths.append(out / "profile.png")
+        fig.savefig(paths[-1], dpi=90)
+        plt.close(fig)
+    return paths

@@ -1,0 +1,231 @@
+"""``fits/NAME/report.html``: one self-contained uncertainty report (images embedded).
+
+Built from what ``idtool fit`` and ``idtool sample`` left in the folder; the same figures
+are written as PNG files under ``figures/`` and a short ``report.md`` sums it up.
+Sections without their inputs (no posterior yet) say what to run instead of vanishing.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+from pathlib import Path
+
+import numpy as np
+
+from idtool._atomic import atomic_output_dir, write_text_atomic
+from idtool._fit._store import load_stored_fit
+from idtool._posterior._store import POSTERIOR_FILE
+from idtool._predict._predict import prediction_draws
+
+__all__ = ["SECTIONS", "write_report"]
+
+SECTIONS = (
+    "Dataset",
+    "Estimates",
+    "Correlations",
+    "Traces and posterior predictive check",
+    "Residuals",
+    "Posterior: corner plot",
+    "Sampling: walkers and convergence",
+    "Friction ratio against amplitude and load",
+    "Amplitude needed for a target reduction",
+    "Model comparison",
+    "Warnings",
+    "Provenance",
+)
+TARGETS = (30.0, 50.0)
+
+
+def _img(path: Path, alt: str) -> str:
+    data = base64.b64encode(path.read_bytes()).decode("ascii")
+    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{data}">'
+
+
+def _table(header: list[str], rows: list[list]) -> str:
+    head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
+    body = "".join(
+        "<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in row) + "</tr>" for row in rows
+    )
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def _g(x: float) -> str:
+    return f"{x:.4g}"
+
+
+def _posterior(folder: Path):
+    """(arviz posterior group, idtool metadata) or (None, None)."""
+    path = folder / POSTERIOR_FILE
+    if not path.is_file():
+        return None, None
+    from idtool._posterior._diagnostics import import_arviz
+
+    idata = import_arviz().from_netcdf(str(path))
+    return idata.posterior, json.loads(idata.posterior.attrs["idtool"])
+
+
+def write_report(fit_folder: str | Path) -> Path:
+    """Write ``report.html``, ``report.md`` and ``figures/*.png`` into ``fit_folder``."""
+    from idtool._report._figures import (
+        amplitude_map_figure,
+        corner_figure,
+        correlation_figure,
+        friction_ratio_figures,
+        walker_figure,
+    )
+
+    folder = Path(fit_folder)
+    fit = load_stored_fit(folder)
+    doc = fit.doc
+    post, meta = _posterior(folder)
+    # 400 draws put the 2.5% and 97.5% points within about 1% of their limits while
+    # keeping the inverse (bisection per draw) quick.
+    draws = prediction_draws(fit, max_draws=400)
+    names = list(fit.model.physical_names)
+    speed = float(np.median(fit.model.data.pull_speed_m_s))
+    sec: dict[str, str] = {}
+    md: list[str] = [f"# idtool report: {fit.dataset.name}", ""]
+
+    with atomic_output_dir(folder / "figures", force=True) as figs:
+        ds = fit.dataset
+        sec["Dataset"] = (
+            f"<p>{html.escape(ds.name)}: {html.escape(ds.material)}; {len(ds.traces)} traces; "
+            f"horn {ds.rig.vibration_frequency_hz:g} Hz, max amplitude "
+            f"{ds.rig.max_amplitude_m * 1e6:g} um; sha256 <code>{ds.sha256}</code></p>"
+            + _table(
+                ["trace", "load [N]", "amplitude", "speed [m/s]", "duration [s]", "ON [s]"],
+                [
+                    [
+                        t.id,
+                        _g(t.normal_load_n),
+                        _g(t.amplitude_fraction),
+                        _g(t.pull_speed_m_s),
+                        f"{t.duration_s:.2f}",
+                        ", ".join(f"{a:.2f}-{b:.2f}" for a, b in t.on_windows_s) or "none",
+                    ]
+                    for t in ds.traces
+                ],
+            )
+        )
+        rows = []
+        for n in names:
+            p = doc["parameters"][n]
+            row = [n, p["unit"], _g(p["estimate"]), f"[{_g(p['ci95'][0])}, {_g(p['ci95'][1])}]"]
+            if post is not None and n in post:
+                v = np.asarray(post[n].values).ravel()
+                lo, med, hi = np.percentile(v, [2.5, 50, 97.5])
+                row += [_g(med), f"[{_g(lo)}, {_g(hi)}]"]
+            else:
+                row += ["-", "no posterior: run idtool sample"]
+            rows.append(row)
+        sec["Estimates"] = _table(
+            ["parameter", "unit", "fit", "fit 95%", "posterior median", "posterior 95%"], rows
+        )
+        md += ["| parameter | fit | 95% | posterior 95% |", "|---|---|---|---|"]
+        md += [f"| {r[0]} [{r[1]}] | {r[2]} | {r[3]} | {r[5]} |" for r in rows]
+
+        corr = doc["correlation"]
+        cpath = correlation_figure(
+            corr["names"], np.array(corr["matrix"]), figs / "correlation.png"
+        )
+        sec["Correlations"] = _img(cpath, "correlation matrix")
+
+        traces_png = folder / ("ppc.png" if (folder / "ppc.png").is_file() else "traces.png")
+        sec["Traces and posterior predictive check"] = (
+            ""
+            if traces_png.name == "ppc.png"
+            else "<p>No posterior predictive check yet "
+            "(run idtool sample); measured against fitted traces:</p>"
+        ) + _img(traces_png, "measured and fitted traces")
+        sec["Residuals"] = _img(folder / "residuals.png", "residuals and autocorrelation")
+
+        corner_src = (
+            {n: np.asarray(post[n].values).ravel() for n in names}
+            if post is not None
+            else draws.values
+        )
+        kpath = corner_figure(corner_src, names, figs / "corner.png")
+        sec["Posterior: corner plot"] = f"<p>Draws: {html.escape(draws.note)}</p>" + _img(
+            kpath, "corner plot"
+        )
+        if post is not None:
+            sampled = [str(v) for v in post.data_vars]
+            chains = {n: np.asarray(post[n].values) for n in sampled}
+            wpath = walker_figure(chains, sampled, figs / "walkers.png")
+            diag = meta["diagnostics"]
+            sec["Sampling: walkers and convergence"] = (
+                f"<pre>{html.escape(json.dumps(diag, indent=1))}</pre>" + _img(wpath, "walkers")
+            )
+            md += ["", f"Sampling converged: {diag.get('converged')}"]
+        else:
+            sec["Sampling: walkers and convergence"] = "<p>No posterior: run idtool sample.</p>"
+
+        p1, p2 = friction_ratio_figures(draws, doc["traces"], speed, figs)
+        sec["Friction ratio against amplitude and load"] = (
+            f"<p>Median and 95% band ({html.escape(draws.note)}); points: the fit's "
+            "friction ratio of each trace with its 95% interval.</p>"
+            + _img(p1, "FR against amplitude")
+            + _img(p2, "FR against load")
+        )
+        loads = fit.model.data.normal_load_n
+        grid = np.linspace(0.5 * loads.min(), 1.5 * loads.max(), 12)
+        apath, amp_rows = amplitude_map_figure(
+            draws, TARGETS, grid, speed, figs / "amplitude_map.png"
+        )
+        sec["Amplitude needed for a target reduction"] = _img(apath, "amplitude map") + (
+            "<ul>"
+            + "".join(f"<li>{html.escape(r.statement())}</li>" for r in amp_rows[::4])
+            + "</ul>"
+        )
+        md += ["", "Amplitude needed:"] + [f"- {r.statement()}" for r in amp_rows[::4]]
+
+        sec["Model comparison"] = f"<p>{html.escape(doc['choice'])}</p>" + _table(
+            ["model", "AIC", "BIC", "log L", "parameters"],
+            [
+                [
+                    m["model"],
+                    f"{m['aic']:.1f}",
+                    f"{m['bic']:.1f}",
+                    f"{m['loglik']:.1f}",
+                    m["n_params"],
+                ]
+                for m in doc["model_comparison"]
+            ],
+        )
+        warnings = list(doc["warnings"]) + ([] if meta is None else meta.get("warnings", []))
+        sec["Warnings"] = (
+            "<ul>" + "".join(f"<li>{html.escape(w)}</li>" for w in warnings) + "</ul>"
+            if warnings
+            else "<p>none</p>"
+        )
+        prov = {
+            "dataset": doc["dataset"],
+            "fit command": doc["command"],
+            "fit seed": doc["seed"],
+            "versions": doc["versions"],
+            "idtool": doc["idtool_version"],
+            "sampling": None
+            if meta is None
+            else {k: meta.get(k) for k in ("seed", "noise", "timing")},
+        }
+        sec["Provenance"] = f"<pre>{html.escape(json.dumps(prov, indent=1))}</pre>"
+        md += ["", f"Dataset sha256 {ds.sha256}; fit command `{doc['command']}`"]
+
+    body = "".join(
+        f'<section id="s{i}"><h2>{html.escape(name)}</h2>{sec[name]}</section>'
+        for i, name in enumerate(SECTIONS)
+    )
+    page = (
+        "<!DOCTYPE html><html><head><meta charset='utf-8'>"
+        f"<title>idtool report: {html.escape(fit.dataset.name)}</title><style>"
+        "body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}"
+        "table{border-collapse:collapse;font-size:0.85em}td,th{border:1px solid #ccc;"
+        "padding:2px 6px}img{max-width:100%;display:block;margin:0.5em 0}"
+        "</style></head><body>"
+        f"<h1>idtool report: {html.escape(fit.dataset.name)}</h1>{body}</body></html>"
+    )
+    out = write_text_atomic(folder / "report.html", page)
+    write_text_atomic(folder / "report.md", "\n".join(md) + "\n")
+    return out

@@ -1,0 +1,127 @@
+"""What a posterior run leaves in the fit folder: ``posterior.nc``, ``sample.json``,
+``report_sample.txt`` (the plain-text report below) and ``ppc.png``."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from idtool._atomic import write_text_atomic
+from idtool._fit._fit import Estimate
+from idtool._model._noise import DEFAULT_NOISE
+from idtool._posterior._likelihood import build_target, conditioning_shrinkage
+from idtool._posterior._ppc import PredictiveCheck, plot_predictive, posterior_predictive
+from idtool._posterior._sample import FitLike, Posterior
+from idtool._posterior._store import write_posterior
+from idtool._provenance import provenance
+from idtool._version import __version__
+
+__all__ = ["POSTERIOR_FILES", "sample_report", "write_posterior_outputs"]
+
+POSTERIOR_FILES = ("chain.h5", "posterior.nc", "sample.json", "report_sample.txt", "ppc.png")
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.5g}"
+
+
+def sample_report(
+    post: Posterior,
+    estimates: Mapping[str, Estimate],
+    check: PredictiveCheck,
+    source: str,
+    shrink: np.ndarray,
+) -> str:
+    """A plain-text report of a posterior run: estimates against the fit's (``source``
+    names the fit), diagnostics, the predictive check, priors, nuisances, warnings."""
+    model = post.model
+    assert model is not None
+    t = post.timing
+    est = estimates
+    lines = [
+        "[[Posterior]]",
+        f"    fit          {source} ({model.law.name} friction, {model.coupling.name} coupling)",
+        f"    noise        {post.noise}"
+        + (" (default)" if post.noise == DEFAULT_NOISE else "")
+        + "; the per-trace nuisances are integrated out, not fixed",
+        f"    sampler      emcee, {post.chain.shape[1]} walkers x {post.chain.shape[0]} steps, "
+        f"seed {post.seed}; compile {t['compile_s']:.1f} s, sampling {t['sampling_s']:.1f} s "
+        f"for {t['steps_this_run']:.0f} steps",
+        "[[Parameters]]  (posterior median and 95% interval; the fit's for comparison)",
+    ]
+    for name, s in post.summary().items():
+        fit_ci = ""
+        if name in est:
+            lo, hi = est[name].ci95
+            fit_ci = f"   fit {_fmt(est[name].estimate)} [{_fmt(lo)}, {_fmt(hi)}]"
+        lines.append(
+            f"    {name:20s}{_fmt(s['median']):>12s} {s['unit']:4s} "
+            f"[{_fmt(s['ci95'][0])}, {_fmt(s['ci95'][1])}]{fit_ci}"
+        )
+    lines += ["[[Diagnostics]]", post.diagnostics.report()]
+    lines += [
+        "[[Posterior predictive check]]",
+        f"    {100 * check.inside_fraction:.1f}% of the measured block means lie inside the "
+        "95% predictive band",
+        f"    lag-1 autocorrelation of the residuals: measured {check.lag1_measured:.3f}, "
+        f"replicated 95% [{check.lag1_replicated[0]:.3f}, {check.lag1_replicated[1]:.3f}], "
+        f"p = {check.lag1_p_value:.2f}",
+        "[[Priors]]",
+    ]
+    lines += [f"    {n:20s}{p.describe()}" for n, p in post.priors.items()]
+    worst = min(shrink)
+    lines += [
+        "[[Nuisances]]",
+        f"    holding the per-trace nuisances at the fit's values would shrink the shared "
+        f"parameters' sds to {100 * worst:.0f}-{100 * max(shrink):.0f}% of their marginal "
+        "values (fit covariance), so they are integrated out",
+        "[[Warnings]]",
+    ]
+    lines += [f"    - {w}" for w in post.warnings] or ["    none"]
+    return "\n".join(lines)
+
+
+def write_posterior_outputs(
+    fit: FitLike,
+    estimates: Mapping[str, Estimate],
+    post: Posterior,
+    folder: str | Path,
+    command: Sequence[str] | None = None,
+) -> str:
+    """Write ``posterior.nc``, ``sample.json``, ``report_sample.txt`` and ``ppc.png`` of
+    ``post`` into ``folder`` (each file atomically); returns the text report."""
+    folder = Path(folder)
+    model = fit.model
+    target = build_target(model, post.z_lin, post.noise, post.priors)
+    check = posterior_predictive(post, fit, seed=post.seed, target=target)
+    shrink = conditioning_shrinkage(fit.cov_z, model.n_shared)
+    report = sample_report(post, estimates, check, str(folder), shrink)
+    prov = provenance(command)
+    doc = {
+        "posterior": post.summary(),
+        "noise": post.noise,
+        "priors": {n: p.to_dict() for n, p in post.priors.items()},
+        "diagnostics": post.diagnostics.to_dict(),
+        "posterior_predictive": check.to_dict(),
+        "nuisances": {
+            "treatment": "integrated out (linearised at the fit, Gaussian)",
+            "sd_ratio_if_fixed": dict(
+                zip(model.names[: model.n_shared], map(float, shrink), strict=True)
+            ),
+        },
+        "warnings": list(post.warnings),
+        "timing_s": post.timing,
+        "seed": post.seed,
+        "idtool_version": __version__,
+        "command": prov["command"],
+        "versions": prov["versions"],
+        "created_utc": prov["created_utc"],
+    }
+    write_posterior(post, folder / "posterior.nc", extra={"fit_folder": str(folder)})
+    write_text_atomic(folder / "sample.json", json.dumps(doc, indent=1) + "\n")
+    write_text_atomic(folder / "report_sample.txt", report + "\n")
+    plot_predictive(check, model.data.trace_ids, folder / "ppc.png")
+    return report

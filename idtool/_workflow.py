@@ -1,0 +1,320 @@
+"""The public workflow: :func:`fit` a dataset, then report, sample, predict and save.
+
+``idtool.fit(dataset) -> Fit`` runs what ``idtool fit`` runs; the :class:`Fit` it returns
+carries the estimates and their intervals, the text report, and (after
+:meth:`Fit.sample`) the posterior. Predictions come from the posterior when there is
+one, else from Gaussian draws on the fit's covariance, and say which. ``Fit.save``
+writes the fit folder the command line writes, and :func:`load_fit` reads it back.
+Everything a notebook needs is here, with no private module in sight.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from idtool._atomic import atomic_output_dir
+from idtool._data._dataset import Dataset, load_dataset
+from idtool._data._write import write_dataset
+from idtool._errors import IdtoolError
+from idtool._fit._fit import Estimate, FitResult
+from idtool._fit._run import FitRun, fit_dataset
+from idtool._fit._store import StoredFit, load_stored_fit, save_fit_state
+from idtool._model._benchmodel import BenchModel
+from idtool._model._noise import DEFAULT_NOISE
+from idtool._posterior._sample import Posterior, sample_posterior
+from idtool._posterior._store import POSTERIOR_FILE, PosteriorDraws, load_posterior
+from idtool._predict._predict import (
+    Draws,
+    draws_from_covariance,
+    draws_from_posterior,
+    draws_from_stored,
+)
+from idtool._predict._tables import Amplitudes, Predictions, amplitude_table, predict_table
+
+__all__ = ["Fit", "fit", "load_fit"]
+
+
+class Fit:
+    """One identified dataset: the chosen model, its estimates, every candidate, and
+    the posterior once sampled. Made by :func:`fit` or :func:`load_fit`.
+
+    Attributes:
+        dataset: the :class:`~idtool.Dataset` fitted.
+        model: the chosen :class:`~idtool.BenchModel` (law, coupling, noise model).
+        estimates: every parameter's :class:`~idtool.Estimate` (value, standard error,
+            95% interval, unit), physical ones first.
+        posterior: the :class:`~idtool.Posterior` after :meth:`sample`, else ``None``.
+    """
+
+    def __init__(
+        self,
+        dataset: Dataset,
+        state: FitResult | StoredFit,
+        run: FitRun | None = None,
+        folder: Path | None = None,
+    ):
+        self.dataset = dataset
+        self._state = state
+        self.run = run
+        self.folder = folder
+        self.posterior: Posterior | None = None
+        self.seconds = 0.0  # time the fit took [s]
+        self._stored_posterior: PosteriorDraws | None = None
+        if folder is not None and (folder / POSTERIOR_FILE).is_file():
+            self._stored_posterior = load_posterior(folder / POSTERIOR_FILE)
+
+    # ------------------------------------------------------------------ what it found
+    @property
+    def model(self) -> BenchModel:
+        return self._state.model
+
+    @property
+    def z(self) -> np.ndarray:
+        """The optimum on the internal scale (all parameters, nuisances included)."""
+        return self._state.z
+
+    @property
+    def cov_z(self) -> np.ndarray:
+        return self._state.cov_z
+
+    @property
+    def phi(self) -> float:
+        return self._state.phi
+
+    @property
+    def sigma_n(self) -> float:
+        return self._state.sigma_n
+
+    @property
+    def estimates(self) -> dict[str, Estimate]:
+        if isinstance(self._state, FitResult):
+            return self._state.estimates
+        return self._state.estimates()
+
+    @property
+    def optima(self) -> list[dict]:
+        """The multi-start's distinct optima (``rss``, internal physical ``z``)."""
+        return self._state.optima
+
+    @property
+    def warnings(self) -> list[str]:
+        if isinstance(self._state, FitResult):
+            return list(self._state.warnings)
+        return list(self._state.doc.get("warnings", []))
+
+    @property
+    def result(self) -> FitResult:
+        """The chosen model's full fit result (in memory only, not after load_fit)."""
+        if not isinstance(self._state, FitResult):
+            raise IdtoolError("a fit read back from disk keeps its estimates, not its result")
+        return self._state
+
+    def __repr__(self) -> str:
+        phys = ", ".join(f"{n}={self.estimates[n].estimate:.4g}" for n in self.model.physical_names)
+        return (
+            f"Fit({self.dataset.name!r}, {self.model.law.name}/{self.model.coupling.name}/"
+            f"{self.model.noise.name}: {phys})"
+        )
+
+    def report(self) -> str:
+        """The fit report a person reads (estimates, intervals, correlations, model
+        comparison, friction ratio per operating point, warnings)."""
+        from idtool._report._fit_text import fit_report
+
+        if self.run is not None:
+            return fit_report(self.run)
+        assert self.folder is not None
+        return (self.folder / "report.txt").read_text().rstrip("\n")
+
+    # ------------------------------------------------------------------ posterior
+    def sample(
+        self,
+        walkers: int = 32,
+        steps: int = 3000,
+        seed: int = 0,
+        *,
+        noise: str | None = None,
+        priors: str | os.PathLike | dict | None = None,
+        progress: bool = False,
+        chain_path: str | os.PathLike | None = None,
+        resume: bool = False,
+        checkpoint_s: float = 20.0,
+    ) -> Posterior:
+        """Sample the posterior of the shared and noise parameters with emcee (the
+        per-trace nuisances integrated out); kept on the fit, so :meth:`predict` uses it
+        from then on. ``chain_path`` checkpoints the chain (``chain.h5``) every
+        ``checkpoint_s`` seconds; ``resume`` continues it. The same seed gives the same
+        chain."""
+        self.posterior = sample_posterior(
+            self,
+            walkers=walkers,
+            steps=steps,
+            seed=seed,
+            noise=noise,
+            priors=priors,
+            chain_path=chain_path,
+            resume=resume,
+            progress=progress,
+            checkpoint_s=checkpoint_s,
+        )
+        return self.posterior
+
+    def save_posterior(
+        self, folder: str | os.PathLike | None = None, command: Sequence[str] | None = None
+    ) -> str:
+        """Write the posterior's files (``posterior.nc``, ``sample.json``,
+        ``report_sample.txt``, ``ppc.png``) into ``folder`` (default: where the fit was
+        saved); returns the posterior's text report."""
+        from idtool._report._sample_text import write_posterior_outputs
+
+        if self.posterior is None:
+            raise IdtoolError("no posterior yet: call Fit.sample() first")
+        where = folder if folder is not None else self.folder
+        if where is None:
+            raise IdtoolError("the fit is not saved: give a folder (or call Fit.save first)")
+        return write_posterior_outputs(self, self.estimates, self.posterior, Path(where), command)
+
+    def draws(self, max_draws: int = 2000, seed: int = 0) -> Draws:
+        """Draws of the physical parameters: the posterior's if sampled (in memory or
+        ``posterior.nc`` beside a loaded fit), else Gaussian on the fit's covariance."""
+        if self.posterior is not None:
+            return draws_from_posterior(self.posterior, self.model, max_draws)
+        if self._stored_posterior is not None:
+            return draws_from_stored(self._stored_posterior, self.model, max_draws)
+        return draws_from_covariance(self.model, self.z, self.cov_z, max_draws, seed)
+
+    # ------------------------------------------------------------------ predictions
+    def predict(
+        self,
+        load_n: float | Sequence[float],
+        amplitude: float | Sequence[float],
+        speed_m_s: float | Sequence[float] | None = None,
+        *,
+        max_draws: int = 2000,
+        seed: int = 0,
+    ) -> Predictions:
+        """Friction ratio FR (median and 95% band) and reduction ``100 (1 - FR)`` [%]
+        over the grid loads [N] x commanded amplitude fractions x speeds [m/s] (default
+        the fit's speed); warns where the grid leaves the fitted range."""
+        draws = self.draws(max_draws, seed)
+        return predict_table(draws, self.model.data, load_n, amplitude, speed_m_s)
+
+    def amplitude_for(
+        self,
+        reduction_percent: float,
+        load_n: float | Sequence[float],
+        speed_m_s: float | Sequence[float] | None = None,
+        *,
+        max_draws: int = 2000,
+        seed: int = 0,
+    ) -> Amplitudes:
+        """The commanded amplitude fraction that lowers friction by
+        ``reduction_percent`` at each load [N] and speed [m/s], with its 95% band, or
+        why it is out of reach."""
+        draws = self.draws(max_draws, seed)
+        return amplitude_table(draws, self.model.data, reduction_percent, load_n, speed_m_s)
+
+    # ------------------------------------------------------------------ files
+    def to_json(self, command: Sequence[str] | None = None) -> dict:
+        """The ``fit.json`` document (schema in the README)."""
+        from idtool._report._fit_text import fit_json
+
+        if self.run is None:
+            assert isinstance(self._state, StoredFit)
+            return self._state.doc
+        path = None if self.dataset.path is None else str(Path(self.dataset.path).resolve())
+        return fit_json(self.run, path, None if command is None else list(command))
+
+    def save(
+        self,
+        path: str | os.PathLike,
+        *,
+        force: bool = False,
+        plots: bool = True,
+        command: Sequence[str] | None = None,
+    ) -> Path:
+        """Write the fit folder (``fit.json``, ``report.txt``, ``fit_state.npz`` and,
+        with ``plots``, ``traces.png`` and ``residuals.png``) all or nothing; an
+        existing folder is replaced only with ``force``. A dataset that lives in memory
+        only (simulated) is written into the folder's ``dataset/`` so the fit can be
+        read back. ``command`` is recorded as provenance (default: the process's)."""
+        from idtool._report._fit_text import plot_fit
+
+        if self.run is None:
+            raise IdtoolError("this fit was read from disk; it is saved already")
+        started = time.perf_counter()
+        out = Path(path)
+        with atomic_output_dir(out, force=force) as tmp:
+            doc = self.to_json(command)
+            if self.dataset.path is None:
+                write_dataset(self.dataset, tmp / "dataset")
+                doc["dataset"]["path"] = "dataset"  # relative to the fit folder
+            doc["seconds"] = round(self.seconds + time.perf_counter() - started, 2)
+            (tmp / "fit.json").write_text(json.dumps(doc, indent=1) + "\n")
+            (tmp / "report.txt").write_text(self.report() + "\n")
+            save_fit_state(tmp, self.result)
+            if plots:
+                plot_fit(self.run, tmp)
+        self.folder = out
+        return out
+
+
+def fit(
+    dataset: Dataset | str | os.PathLike,
+    *,
+    law: str = "dahl",
+    coupling: str = "power-limited",
+    noise: str = DEFAULT_NOISE,
+    seed: int = 0,
+    starts: int = 8,
+    compare_laws: bool = False,
+    profile: bool = False,
+    mains_hz: float = 50.0,
+) -> Fit:
+    """Identify Kt, mu and the coupling from every trace of ``dataset`` at once.
+
+    Args:
+        dataset: a :class:`~idtool.Dataset` or the path of a v1 dataset folder.
+        law: friction law, a name of :data:`idtool.FRICTION_LAWS` ("dahl", "lugre").
+        coupling: a name of :data:`idtool.COUPLINGS`, or "auto" (fit every coupling
+            law, keep the lowest BIC).
+        noise: a name of :data:`idtool.NOISE_MODELS` (default "ar1").
+        seed: seeds the multi-start points; the same seed gives the same fit.
+        starts: multi-start points.
+        compare_laws: also fit every other friction law and rank them by BIC.
+        profile: profile-likelihood intervals of the physical parameters.
+        mains_hz: mains frequency [Hz]: block means span whole mains periods.
+    """
+    if starts < 1:
+        raise IdtoolError(f"starts = {starts}: give at least 1")
+    started = time.perf_counter()
+    if not isinstance(dataset, Dataset):
+        dataset = load_dataset(Path(dataset))
+    run = fit_dataset(
+        dataset,
+        law=law,
+        coupling=coupling,
+        seed=seed,
+        n_starts=starts,
+        compare_laws=compare_laws,
+        profile=profile,
+        mains_hz=mains_hz,
+        noise=noise,
+    )
+    out = Fit(dataset, run.chosen, run)
+    out.seconds = time.perf_counter() - started
+    return out
+
+
+def load_fit(path: str | os.PathLike) -> Fit:
+    """Read a fit folder written by :meth:`Fit.save` (or ``idtool fit``), with its
+    posterior if ``posterior.nc`` is beside it. The dataset must still be where the fit
+    found it, unchanged (its sha256 is checked)."""
+    stored = load_stored_fit(Path(path))
+    return Fit(stored.dataset, stored, None, Path(path))
