@@ -79,36 +79,41 @@ class NumpyPosterior:
     """The idtool log-posterior of one walker in NumPy/SciPy (Dahl, power-limited)."""
 
     def __init__(self, target):
-        assert target.law == "dahl" and target.coupling == "power-limited"
-        assert target.noise == "ar1"
+        m = target.model
+        d = m.data
+        assert m.law.name == "dahl" and m.coupling.name == "power-limited"
+        assert m.noise.name == "ar1"
+        bt = np.asarray(d.block_trace)
+        nu = {k: np.asarray(x) for k, x in target.nuisances.items()}
+
+        def per_block(x):
+            return np.asarray(x)[bt][:, None]
+
         a = {
-            k: np.asarray(getattr(target, k))
-            for k in (
-                "force_n",
-                "sub_time_s",
-                "first",
-                "block_trace",
-                "startup_s",
-                "on_start_s",
-                "on_end_s",
-                "offset_n",
-                "load_n",
-                "speed_m_s",
-                "op_index",
-                "op_load_n",
-                "op_alpha",
-                "op_speed_m_s",
-                "jac_e",
-                "gram",
-                "continues",
-            )
+            "force_n": np.asarray(d.force_n),
+            "sub_time_s": np.asarray(d.sub_time_s),
+            "first": np.asarray(d.first),
+            "block_trace": bt,
+            "startup_s": per_block(nu["pull_start_s"]),
+            "on_start_s": per_block(d.on_start_s + nu["delay_on_s"]),
+            "on_end_s": per_block(d.on_end_s + nu["delay_off_s"]),
+            "offset_n": per_block(nu["offset_n"]),
+            "load_n": np.asarray(d.normal_load_n),
+            "speed_m_s": np.asarray(d.pull_speed_m_s),
+            "op_index": np.asarray(d.op_index),
+            "op_load_n": np.asarray(d.op_load_n),
+            "op_alpha": np.asarray(d.op_alpha),
+            "op_speed_m_s": np.asarray(d.op_speed_m_s),
+            "jac_e": np.asarray(target.jac_e),
+            "gram": np.asarray(target.gram),
+            "continues": np.asarray(target.continues),
         }
         self.a = a
         self.params = target.params
         self.priors = target.priors
-        self.n_traces = target.n_traces
-        self.w = 2 * math.pi * float(target.vibration_frequency_hz)
-        self.a_max = float(target.max_amplitude_m)
+        self.n_traces = d.n_traces
+        self.w = 2 * math.pi * float(d.vibration_frequency_hz)
+        self.a_max = float(d.max_amplitude_m)
         for prior in self.priors:
             assert prior.dist in ("loguniform", "uniform")
         self.evaluations = 0

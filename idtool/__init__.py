@@ -31,9 +31,13 @@ from idtool._model._coupling import (  # noqa: E402
     PowerLimitedCoupling,
 )
 from idtool._model._laws import FRICTION_LAWS, AbstractFrictionLaw, Coulomb, Dahl, LuGre  # noqa: E402
+from idtool._model._limits import (  # noqa: E402
+    coulomb_friction_ratio,
+    dahl_small_lambda_friction_ratio,
+)
 from idtool._model._noise import NOISE_MODELS, AbstractNoise  # noqa: E402
 from idtool._model._params import Param  # noqa: E402
-from idtool._model._seed_study import seed_study  # noqa: E402
+from idtool._model._seed_study import SEED_FIGURES, plot_seed_study, seed_study  # noqa: E402
 from idtool._model._transducer import (  # noqa: E402
     EnergyBalance,
     Transducer,
@@ -56,6 +60,7 @@ __all__ = [
     "COUPLINGS",
     "FRICTION_LAWS",
     "NOISE_MODELS",
+    "SEED_FIGURES",
     "AbstractCoupling",
     "AbstractFrictionLaw",
     "AbstractNoise",
@@ -86,13 +91,16 @@ __all__ = [
     "TransducerSteadyState",
     "__version__",
     "bench_model",
+    "coulomb_friction_ratio",
     "cycle_average_curve",
+    "dahl_small_lambda_friction_ratio",
     "example_dataset_path",
     "example_params_path",
     "fit",
     "load_bench_params",
     "load_dataset",
     "load_fit",
+    "plot_seed_study",
     "prescribed_cycle_average",
     "seed_study",
     "simulate_bench",

@@ -31,6 +31,33 @@ def fitted(tmp_path_factory):
     return out
 
 
+@pytest.fixture(scope="module")
+def sampled_report(fitted, tmp_path_factory):
+    """The same fit with a (short) posterior, reported again."""
+    folder = tmp_path_factory.mktemp("report-posterior") / "r"
+    shutil.copytree(fitted, folder)
+    argv = ["sample", str(folder), "--walkers", "20", "--steps", "150", "--no-progress"]
+    assert main(argv) == 0
+    assert main(["report", str(folder)]) == 0
+    return folder
+
+
+def test_report_with_a_posterior_shows_it(fitted, sampled_report):
+    page = (sampled_report / "report.html").read_text()
+    for name in SECTIONS:
+        assert f"<h2>{name}</h2>" in page, name
+    assert "no posterior" not in page.lower()
+    # every physical parameter has a posterior interval beside the fit's
+    estimates = page.split("<h2>Estimates</h2>")[1].split("<h2>")[0]
+    assert estimates.count("<tr>") == 1 + 4 and "no posterior" not in estimates
+    assert estimates.count("[") == 2 * 4
+    # posterior predictive check and walkers replace the fit-only figures
+    assert len(images_of(page)) == len(images_of((fitted / "report.html").read_text())) + 1
+    assert (sampled_report / "figures" / "walkers.png").is_file()
+    assert '"converged": false' in page  # 150 steps: the chain is reported unconverged
+    assert "Draws: posterior" in page
+
+
 def images_of(page: str) -> list[bytes]:
     return [base64.b64decode(m) for m in re.findall(r'src="data:image/png;base64,([^"]+)"', page)]
 

@@ -15,7 +15,7 @@ from idtool._data._dataset import Rig
 from idtool._data._schema import SIMULATOR_PARAMS_SCHEMA, schema_problems
 from idtool._errors import IdtoolError
 from idtool._jsonio import parse_json
-from idtool._model._coupling import AbstractCoupling, ConstantCoupling, PowerLimitedCoupling
+from idtool._model._coupling import COUPLINGS, AbstractCoupling
 
 __all__ = [
     "ActuatorParams",
@@ -50,11 +50,10 @@ class CouplingParams:
     power_load_n: float | None = None
 
     def model(self) -> AbstractCoupling:
-        """The :mod:`idtool._model._coupling` object of this law."""
-        if self.law == "power_limited":
-            assert self.power_load_n is not None  # the schema requires it
-            return PowerLimitedCoupling(gain=self.gain, power_load_n=self.power_load_n)
-        return ConstantCoupling(gain=self.gain)
+        """The registered coupling law of this name (``power_limited`` in the file is
+        the registry's ``power-limited``)."""
+        values: dict[str, Any] = {"coupling_gain": self.gain, "power_load_n": self.power_load_n}
+        return COUPLINGS.get(self.law.replace("_", "-")).from_values(values)
 
 
 @dataclasses.dataclass(frozen=True)
