@@ -54,7 +54,7 @@ def test_report_with_a_posterior_shows_it(fitted, sampled_report):
     # posterior predictive check and walkers replace the fit-only figures
     assert len(images_of(page)) == len(images_of((fitted / "report.html").read_text())) + 1
     assert (sampled_report / "figures" / "walkers.png").is_file()
-    assert '"converged": false' in page  # 150 steps: the chain is reported unconverged
+    assert "&quot;converged&quot;: false" in page  # 150 steps: reported unconverged
     assert "Draws: posterior" in page
 
 
