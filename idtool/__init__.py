@@ -8,53 +8,74 @@ Importing idtool switches JAX to 64-bit floats: the cycle averages and the fits 
 double precision (gradients are checked against finite differences at 1e-4).
 """
 
+import importlib
+from typing import TYPE_CHECKING
+
 import jax as _jax
 
+# Before any module of the package creates an array.
 _jax.config.update("jax_enable_x64", True)
 
-
-from idtool._data._dataset import Dataset, Rig, Trace, load_dataset  # noqa: E402
-from idtool._data._example import example_dataset_path, example_params_path  # noqa: E402
-from idtool._data._write import write_dataset  # noqa: E402
-from idtool._errors import IdtoolError  # noqa: E402
-from idtool._fit._fit import Estimate  # noqa: E402
-from idtool._model._benchmodel import BenchModel, bench_model  # noqa: E402
-from idtool._model._contact import (  # noqa: E402
-    CycleAverage,
-    cycle_average_curve,
-    prescribed_cycle_average,
-)
-from idtool._model._coupling import (  # noqa: E402
-    COUPLINGS,
-    AbstractCoupling,
-    ConstantCoupling,
-    PowerLimitedCoupling,
-)
-from idtool._model._laws import FRICTION_LAWS, AbstractFrictionLaw, Coulomb, Dahl, LuGre  # noqa: E402
-from idtool._model._limits import (  # noqa: E402
-    coulomb_friction_ratio,
-    dahl_small_lambda_friction_ratio,
-)
-from idtool._model._noise import NOISE_MODELS, AbstractNoise  # noqa: E402
-from idtool._model._params import Param  # noqa: E402
-from idtool._model._seed_study import SEED_FIGURES, plot_seed_study, seed_study  # noqa: E402
-from idtool._model._transducer import (  # noqa: E402
-    EnergyBalance,
-    Transducer,
-    TransducerSteadyState,
-    simulate_transducer,
-    table2,
-    transducer_steady_state,
-)
-from idtool._posterior._prior import Prior  # noqa: E402
-from idtool._posterior._sample import Posterior  # noqa: E402
-from idtool._predict._predict import AmplitudeFor, Prediction  # noqa: E402
-from idtool._predict._tables import Amplitudes, Predictions  # noqa: E402
-from idtool._report._html import write_report  # noqa: E402
-from idtool._simulate._params import BenchParams, load_bench_params  # noqa: E402
-from idtool._simulate._simulate import BenchTruth, simulate_bench, write_simulation  # noqa: E402
 from idtool._version import __version__  # noqa: E402
-from idtool._workflow import Fit, fit, load_fit  # noqa: E402
+
+# Public name -> the private module defining it. Imported on first use (module
+# __getattr__, PEP 562): ``import idtool`` costs about what ``import jax`` does, and a
+# command loads only what it uses (equinox, pyarrow, pandas, matplotlib, arviz stay out
+# of ``idtool --help``).
+_LAZY = {
+    "Dataset": "idtool._data._dataset",
+    "Rig": "idtool._data._dataset",
+    "Trace": "idtool._data._dataset",
+    "load_dataset": "idtool._data._dataset",
+    "example_dataset_path": "idtool._data._example",
+    "example_params_path": "idtool._data._example",
+    "write_dataset": "idtool._data._write",
+    "IdtoolError": "idtool._errors",
+    "Estimate": "idtool._fit._fit",
+    "BenchModel": "idtool._model._benchmodel",
+    "bench_model": "idtool._model._benchmodel",
+    "CycleAverage": "idtool._model._contact",
+    "cycle_average_curve": "idtool._model._contact",
+    "prescribed_cycle_average": "idtool._model._contact",
+    "AbstractCoupling": "idtool._model._coupling",
+    "COUPLINGS": "idtool._model._coupling",
+    "ConstantCoupling": "idtool._model._coupling",
+    "PowerLimitedCoupling": "idtool._model._coupling",
+    "AbstractFrictionLaw": "idtool._model._laws",
+    "Coulomb": "idtool._model._laws",
+    "Dahl": "idtool._model._laws",
+    "FRICTION_LAWS": "idtool._model._laws",
+    "LuGre": "idtool._model._laws",
+    "coulomb_friction_ratio": "idtool._model._limits",
+    "dahl_small_lambda_friction_ratio": "idtool._model._limits",
+    "AbstractNoise": "idtool._model._noise",
+    "NOISE_MODELS": "idtool._model._noise",
+    "Param": "idtool._model._params",
+    "SEED_FIGURES": "idtool._model._seed_study",
+    "plot_seed_study": "idtool._model._seed_study",
+    "seed_study": "idtool._model._seed_study",
+    "EnergyBalance": "idtool._model._transducer",
+    "Transducer": "idtool._model._transducer",
+    "TransducerSteadyState": "idtool._model._transducer",
+    "simulate_transducer": "idtool._model._transducer",
+    "table2": "idtool._model._transducer",
+    "transducer_steady_state": "idtool._model._transducer",
+    "Prior": "idtool._posterior._prior",
+    "Posterior": "idtool._posterior._sample",
+    "AmplitudeFor": "idtool._predict._predict",
+    "Prediction": "idtool._predict._predict",
+    "Amplitudes": "idtool._predict._tables",
+    "Predictions": "idtool._predict._tables",
+    "write_report": "idtool._report._html",
+    "BenchParams": "idtool._simulate._params",
+    "load_bench_params": "idtool._simulate._params",
+    "BenchTruth": "idtool._simulate._simulate",
+    "simulate_bench": "idtool._simulate._simulate",
+    "write_simulation": "idtool._simulate._simulate",
+    "Fit": "idtool._workflow",
+    "fit": "idtool._workflow",
+    "load_fit": "idtool._workflow",
+}
 
 __all__ = [
     "COUPLINGS",
@@ -111,3 +132,54 @@ __all__ = [
     "write_report",
     "write_simulation",
 ]
+
+
+def __getattr__(name: str):
+    try:
+        module = _LAZY[name]
+    except KeyError:
+        raise AttributeError(f"module 'idtool' has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
+
+if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerly
+    from idtool._data._dataset import Dataset, Rig, Trace, load_dataset
+    from idtool._data._example import example_dataset_path, example_params_path
+    from idtool._data._write import write_dataset
+    from idtool._errors import IdtoolError
+    from idtool._fit._fit import Estimate
+    from idtool._model._benchmodel import BenchModel, bench_model
+    from idtool._model._contact import CycleAverage, cycle_average_curve, prescribed_cycle_average
+    from idtool._model._coupling import (
+        COUPLINGS,
+        AbstractCoupling,
+        ConstantCoupling,
+        PowerLimitedCoupling,
+    )
+    from idtool._model._laws import FRICTION_LAWS, AbstractFrictionLaw, Coulomb, Dahl, LuGre
+    from idtool._model._limits import coulomb_friction_ratio, dahl_small_lambda_friction_ratio
+    from idtool._model._noise import NOISE_MODELS, AbstractNoise
+    from idtool._model._params import Param
+    from idtool._model._seed_study import SEED_FIGURES, plot_seed_study, seed_study
+    from idtool._model._transducer import (
+        EnergyBalance,
+        Transducer,
+        TransducerSteadyState,
+        simulate_transducer,
+        table2,
+        transducer_steady_state,
+    )
+    from idtool._posterior._prior import Prior
+    from idtool._posterior._sample import Posterior
+    from idtool._predict._predict import AmplitudeFor, Prediction
+    from idtool._predict._tables import Amplitudes, Predictions
+    from idtool._report._html import write_report
+    from idtool._simulate._params import BenchParams, load_bench_params
+    from idtool._simulate._simulate import BenchTruth, simulate_bench, write_simulation
+    from idtool._workflow import Fit, fit, load_fit

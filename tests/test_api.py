@@ -149,3 +149,20 @@ def test_fit_predicts_in_memory_from_covariance_then_posterior():
     assert set(idata.posterior.data_vars) >= {"Kt", "mu", "sigma_n", "phi"}
     need = post.amplitude_for(40.0, [270.0, 670.0])
     assert [a.normal_load_n for a in need] == [270.0, 670.0]
+
+
+def test_every_public_name_resolves_lazily():
+    """``__all__`` and the lazy table agree, and ``import idtool`` loads none of the
+    heavy modules a command may not need."""
+    import subprocess
+    import sys
+
+    assert set(idtool.__all__) == {*idtool._LAZY, "__version__"}
+    code = (
+        "import sys, idtool; "
+        "print(sorted({m.split('.')[0] for m in sys.modules} & "
+        "{'equinox', 'pandas', 'matplotlib', 'arviz', 'emcee', 'scipy', 'pyarrow'}))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+    assert "Fit" in dir(idtool)

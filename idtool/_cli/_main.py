@@ -57,7 +57,12 @@ def _enable_compilation_cache() -> None:
     path = os.environ.get("IDTOOL_CACHE_DIR", os.path.expanduser("~/.cache/idtool/jax"))
     if path:
         jax.config.update("jax_compilation_cache_dir", path)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.05)
+        # Every program, however small: two dozen of 20-30 ms each were recompiled on
+        # every run below the default threshold (0.6 s of a warm fit).
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+        # XLA's own autotuning caches put the cache folder's path into the compile
+        # options, so the key of the same program changed with IDTOOL_CACHE_DIR.
+        jax.config.update("jax_persistent_cache_enable_xla_caches", "none")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -200,6 +200,11 @@ def plot_fit(run: FitRun, out_dir: str | Path) -> list[Path]:
     cols = 4
     rows = int(np.ceil(d.n_traces / cols))
     fig, axes = plt.subplots(rows, cols, figsize=(14, 2.2 * rows), sharex=False, squeeze=False)
+    # Fixed margins rather than tight_layout, and few ticks: laying out and ticking 24
+    # panels was 2 of the 3 s this figure took, most of a repeated fit's time.
+    top = 1.0 - 0.35 / (2.2 * rows)
+    fig.subplots_adjust(left=0.06, right=0.99, bottom=0.6 / (2.2 * rows) + 0.02, top=top)
+    fig.subplots_adjust(hspace=0.45, wspace=0.18)
     for i, ax in enumerate(axes.flat):
         if i >= d.n_traces:
             ax.axis("off")
@@ -207,12 +212,12 @@ def plot_fit(run: FitRun, out_dir: str | Path) -> list[Path]:
         sel = d.block_trace == i
         ax.plot(d.block_time_s[sel], d.force_n[sel], ".", ms=2, color="0.5", label="data")
         ax.plot(d.block_time_s[sel], pred[sel], "-", lw=1.2, color="C3", label="fit")
-        ax.set_title(d.trace_ids[i], fontsize=8)
+        ax.set_title(d.trace_ids[i], fontsize=8, pad=2)
         ax.tick_params(labelsize=7)
+        ax.locator_params(nbins=4)
     axes.flat[0].legend(fontsize=7)
-    fig.supxlabel("time [s]")
-    fig.supylabel("force [N] (block means)")
-    fig.tight_layout()
+    fig.supxlabel("time [s]", fontsize=9)
+    fig.supylabel("force [N] (block means)", fontsize=9)
     paths = [out / "traces.png"]
     fig.savefig(paths[-1], dpi=90)
     plt.close(fig)

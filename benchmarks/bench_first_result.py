@@ -1,0 +1,132 @@
+"""Time to a first result: where ``idtool fit`` of the example spends its time.
+
+Each run is a fresh interpreter doing what ``idtool fit DATASET --out DIR`` does, with
+the persistent compilation cache of the command line, in phases:
+
+* ``import``: ``import idtool`` and the command line's parser;
+* ``load``: reading and checking the dataset;
+* ``fit``: ``idtool.fit`` (multi-start, polish, AR(1) rounds, interval checks), with
+  the JAX tracing, lowering to StableHLO and XLA compilation (or cache loading) inside
+  it reported separately from ``jax.monitoring``;
+* ``report``: the text report; ``save``: fit.json, fit_state.npz and the two figures.
+
+First with an empty cache folder (cold: what a new user waits), then three times with
+it warm (a repeated fit of a dataset of the same shape). Also ``import idtool`` alone
+against ``import jax`` alone (the floor).
+
+    python benchmarks/bench_first_result.py [--repeat 3]
+
+There is no SciPy side to this one: it breaks down idtool's own time to a first result
+(``bench_fit.py`` compares the fit with a SciPy implementation).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+RUN = r"""
+import time
+t0 = time.perf_counter()
+import collections, json, sys
+import jax
+phases = collections.OrderedDict()
+jax_events = collections.Counter()
+
+KEYS = {"jaxpr_trace_duration": "trace", "jaxpr_to_mlir_module_duration": "lowering",
+        "backend_compile_duration": "compile"}
+
+def on_duration(event, secs, **_):
+    key = KEYS.get(event.rsplit("/", 1)[-1])
+    if key:
+        jax_events[key] += secs
+
+jax.monitoring.register_event_duration_secs_listener(on_duration)
+from idtool._cli._main import _enable_compilation_cache, build_parser
+_enable_compilation_cache()
+build_parser()
+import idtool
+def mark(name):
+    global t0
+    now = time.perf_counter(); phases[name] = now - t0; t0 = now
+mark("import")
+ds = idtool.load_dataset(idtool.example_dataset_path())
+mark("load")
+jax_events.clear()
+fit = idtool.fit(ds, seed=0)
+mark("fit")
+fit_jax = dict(jax_events)
+text = fit.report()
+mark("report")
+fit.save(sys.argv[1], force=True, command=["fit"])
+mark("save")
+json.dump({"phases": phases, "jax_in_fit": fit_jax,
+           "Kt": fit.estimates["Kt"].estimate}, open(sys.argv[2], "w"))
+"""
+
+
+def run_once(cache: str, out: Path) -> dict:
+    result = out.with_suffix(".json")
+    env = os.environ | {"IDTOOL_CACHE_DIR": cache, "MPLBACKEND": "Agg"}
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-c", RUN, str(out), str(result)], env=env, check=True)
+    doc = json.loads(result.read_text())
+    doc["wall"] = time.perf_counter() - t0
+    return doc
+
+
+def import_time(module: str, repeat: int) -> float:
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-c", f"import {module}"], check=True)
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=3, help="warm runs (default 3)")
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        cache = str(root / "cache")
+        cold = run_once(cache, root / "fit0")
+        warm = [run_once(cache, root / f"fit{i + 1}") for i in range(args.repeat)]
+    names = list(cold["phases"])
+    print(f"idtool fit of the example dataset, fresh interpreters (cpus: {os.cpu_count()})")
+    print(f"{'phase':28s}{'cold [s]':>10s}{'warm median [s]':>18s}")
+    for name in names:
+        w = statistics.median(r["phases"][name] for r in warm)
+        print(f"{name:28s}{cold['phases'][name]:10.2f}{w:18.2f}")
+        if name == "fit":
+            for key, label in (
+                ("trace", "tracing"),
+                ("lowering", "lowering"),
+                ("compile", "XLA compile/load"),
+            ):
+                c = cold["jax_in_fit"].get(key, 0.0)
+                w = statistics.median(r["jax_in_fit"].get(key, 0.0) for r in warm)
+                print(f"  of which JAX {label:15s}{c:10.2f}{w:18.2f}")
+    total_c = sum(cold["phases"].values())
+    total_w = statistics.median(sum(r["phases"].values()) for r in warm)
+    wall_w = statistics.median(r["wall"] for r in warm)
+    print(f"{'total in process':28s}{total_c:10.2f}{total_w:18.2f}")
+    print(f"{'wall, with interpreter':28s}{cold['wall']:10.2f}{wall_w:18.2f}")
+    kts = {round(r["Kt"], 3) for r in [cold, *warm]}
+    print(f"Kt identical across runs: {len(kts) == 1}")
+    n = max(3, args.repeat)
+    print(
+        f"import idtool {import_time('idtool', n):.2f} s; import jax {import_time('jax', n):.2f} s"
+    )
+
+
+if __name__ == "__main__":
+    main()
