@@ -1,7 +1,7 @@
 """Benchmark: joint fit of the example dataset, idtool (JAX) against plain SciPy/NumPy.
 
 The model (Dahl law, power-limited coupling) and the fitting problem are those of
-:class:`idtool._model._benchmodel.FitModel`, re-implemented here without JAX:
+:class:`idtool.BenchModel`, re-implemented here without JAX:
 
 * contact: the friction ratio FR at each operating point from the Dahl bristle ODE
   ``df/dtheta = Lambda (VR + cos theta)(1 - sgn(VR + cos theta) f)`` solved by
@@ -17,7 +17,7 @@ The model (Dahl law, power-limited coupling) and the fitting problem are those o
   evaluation), checked against ``mean_force_n`` to 1e-9 N. A vectorised NumPy version is
   timed as well, and the report says what the SciPy fit would cost with it;
 * the same block-averaged data (``prepare_fit_data``, ``periods_per_block=2``), the same
-  data-driven start values, parameters and transforms (the ``FitModel.specs`` numbers,
+  data-driven start values, parameters and transforms (the ``BenchModel.params`` numbers,
   evaluated in NumPy), the same exact AR(1) whitening;
 * the same procedure as :func:`idtool._fit._fit.fit_model`: 8 quasi-random starts (seed 0,
   the same points), from each a joint fit of all parameters for 20 steps, the lowest
@@ -30,7 +30,7 @@ The model (Dahl law, power-limited coupling) and the fitting problem are those o
 Timed, each in a fresh interpreter (wall time of the subprocess: interpreter start-up,
 imports and JIT compilation all count):
 
-1. end to end: idtool ``import idtool`` + load + ``fit_start`` + ``fit_model``, against
+1. end to end: idtool ``import idtool`` + load + ``prepare_fit_data`` + ``fit_model``, against
    the SciPy replica of ``fit_model`` (and idtool once more with XLA's persistent
    compilation cache filled by an earlier run, as ``idtool fit`` keeps it). The SciPy
    process reads the prepared arrays and the quasi-random start points from an .npz
@@ -39,7 +39,7 @@ imports and JIT compilation all count):
 2. the matched polish alone: all (102) parameters from idtool's multi-start optimum (the
    nuisances at their start values, where ``fit_model`` starts its polish) with phi
    fixed at idtool's final value; idtool runs its own compiled Levenberg-Marquardt
-   (``idtool._fit._fit.compiled_lm``), SciPy ``least_squares`` as above.
+   (``idtool._fit._fit.run_lm``), SciPy ``least_squares`` as above.
 
 In-process it also measures idtool's warm ``fit_model`` (a second call on the same
 data: its compiled programs are reused), the cost of one jitted residual evaluation, of
@@ -109,9 +109,12 @@ jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.05)
 IDTOOL_FULL = """
 import json, sys
 import idtool
-from idtool._fit._fit import fit_model, fit_start
+from idtool._data._blocks import prepare_fit_data
+from idtool._fit._fit import fit_model
 
-data = fit_start(idtool.load_dataset(idtool.example_dataset_path()), periods_per_block={ppb})
+data = prepare_fit_data(
+    idtool.load_dataset(idtool.example_dataset_path()), periods_per_block={ppb}
+)
 r = fit_model(data)
 k = len(r.model.physical_names)
 z_start = r.model.z0()
@@ -128,13 +131,17 @@ IDTOOL_POLISH = """
 import json, sys
 import jax.numpy as jnp
 import idtool
-from idtool._fit._fit import compiled_lm, fit_start, model_for
+from idtool._data._blocks import prepare_fit_data
+from idtool._fit._fit import run_lm
+from idtool._model._benchmodel import bench_model
 
 job = json.load(open(sys.argv[2]))
-data = fit_start(idtool.load_dataset(idtool.example_dataset_path()), periods_per_block={ppb})
-model = model_for(data, "dahl", "power-limited")
+data = prepare_fit_data(
+    idtool.load_dataset(idtool.example_dataset_path()), periods_per_block={ppb}
+)
+model = bench_model(data, "dahl", "power-limited")
 z0 = jnp.asarray(job["z_start"])
-out = compiled_lm(model)(z0, jnp.ones(z0.size, bool), job["phi"], 100)
+out = run_lm(model, z0, jnp.ones(z0.size, bool), job["phi"], 100)
 json.dump({{"z": [float(x) for x in out.z], "lm_steps": int(out.steps),
            "converged": bool(out.converged), "cost": float(out.loss)}}, open(sys.argv[1], "w"))
 """
@@ -516,17 +523,13 @@ def main(repeat: int = 1) -> None:
     import jax.numpy as jnp
 
     import idtool
-    from idtool._fit._fit import (
-        _START_BOX,
-        compiled_lm,
-        fit_model,
-        fit_start,
-        model_for,
-        quasi_random,
-    )
+    from idtool._data._blocks import prepare_fit_data
+    from idtool._fit._fit import fit_model, quasi_random, run_lm
+    from idtool._model._benchmodel import bench_model
 
     t0 = time.perf_counter()
-    data = fit_start(idtool.load_dataset(idtool.example_dataset_path()), periods_per_block=ppb)
+    dataset = idtool.load_dataset(idtool.example_dataset_path())
+    data = prepare_fit_data(dataset, periods_per_block=ppb)
     prepare_s = time.perf_counter() - t0
     # XLA backend compilations during the warm call (they do not nest, so they add up)
     compiles: list[float] = []
@@ -541,16 +544,19 @@ def main(repeat: int = 1) -> None:
     warm_t, warm = timed(lambda: fit_model(data))
     warm_s = warm_t.wall
     warm_compile_s, warm_compiles = sum(compiles), len(compiles)
-    model = model_for(data, "dahl", "power-limited")
-    residuals = jax.jit(model.residuals)
-    jacobian = jax.jit(jax.jacfwd(model.residuals))
+    model = bench_model(data, "dahl", "power-limited")
+    residuals = jax.jit(lambda z, phi: model.residuals(z, phi))
+    jacobian = jax.jit(jax.jacfwd(lambda z, phi: model.residuals(z, phi)))
     structure = model.level_structure
-    coloured = jax.jit(model.normal_equations)
+    coloured = jax.jit(lambda z, phi: model.normal_equations(z, phi))
     zj = jnp.asarray(z_start)
     residuals(zj, phi).block_until_ready()
     jacobian(zj, phi).block_until_ready()
     coloured(zj, phi)[1].block_until_ready()
-    lm = compiled_lm(model)
+
+    def lm(z, mask, phi, max_steps):
+        return run_lm(model, z, mask, phi, max_steps)
+
     mask = jnp.ones(z_start.size, bool)
 
     def micro():
@@ -566,15 +572,15 @@ def main(repeat: int = 1) -> None:
     micro_t, (resid_s, jac_s, col_s, polish_run_s, polish_steps) = timed(micro)
 
     # the problem as plain arrays, and fit_model's quasi-random start points
-    specs = model.specs
+    specs = model.params
     k = len(PHYSICAL)
     assert tuple(full["names"]) == model.names
     starts = []
     for u in quasi_random(N_STARTS, k, SEED):
         box = {}
         for j, p in enumerate(specs[:k]):
-            if p.name in _START_BOX:
-                lo, hi = np.log(_START_BOX[p.name])
+            if p.start_box is not None and p.name != "coupling_gain":
+                lo, hi = np.log(p.start_box)
                 box[p.name] = float(np.exp(lo + u[j] * (hi - lo)))
         starts.append(model.z0(**box)[:k])
     # The layout the SciPy side reproduces: shared parameters, then per-trace groups.
@@ -587,7 +593,9 @@ def main(repeat: int = 1) -> None:
         or shared != [*PHYSICAL, "slope_n_s", "startup_slope_n_s"]
         or not set(groups) <= known
     ):
-        raise SystemExit(f"FitModel's parameters changed; update this benchmark: {shared} {groups}")
+        raise SystemExit(
+            f"BenchModel's parameters changed; update the benchmark: {shared} {groups}"
+        )
     arrays: dict[str, Any] = {
         "shared_names": np.array(shared),
         "trace_groups": np.array(groups),
@@ -761,7 +769,7 @@ def main(repeat: int = 1) -> None:
         f"(ratio to idtool ~{(wall_sp.wall - saved) / wall_full.wall:.1f})"
     )
     print(
-        f"  idtool: load + fit_start {prepare_s:.2f} s; fit_model in-process: first call "
+        f"  idtool: load + prepare {prepare_s:.2f} s; fit_model in-process: first call "
         f"{cold.wall:.1f} s, second (warm) call {warm_s:.1f} s, {warm.lm_steps} LM steps"
     )
     print(

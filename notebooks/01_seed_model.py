@@ -21,19 +21,23 @@
 # 2. the paper's single-degree-of-freedom transducer (eqs. 6-7) and its energy balance;
 # 3. the Table 2 parameter sweeps of Section 3.6 (Figures 8-11).
 #
-# Open it in Jupyter with jupytext installed (it is a paired `py:percent` notebook), or
-# run it as a script: `python notebooks/01_seed_model.py`.
+# Everything here uses idtool's public API only (`import idtool`, then the names it
+# exports). Open it in Jupyter with jupytext installed (it is a paired
+# `py:percent` notebook), or run it as a script: `python notebooks/01_seed_model.py`.
+# Figures are also saved into a fresh temporary folder, printed below.
 
 # %%
-import matplotlib
+import tempfile
+from pathlib import Path
 
-matplotlib.use("Agg")  # headless by default; drop this line in a live notebook
 import jax
 import matplotlib.pyplot as plt
 import numpy as np
 
 import idtool
-from idtool._model import _limits as limits
+
+out_dir = Path(tempfile.mkdtemp(prefix="idtool-nb01-"))
+print("figures go to", out_dir)
 
 # %% [markdown]
 # ## 1. Friction ratio against velocity ratio
@@ -47,12 +51,13 @@ fig, ax = plt.subplots(figsize=(6, 4))
 for lam in (0.3, 1.0, 3.0, 10.0, 100.0):
     out = idtool.cycle_average_curve(idtool.Dahl(fc_n=1.0, kt_n_m=lam), vr)
     ax.plot(vr, out.friction_ratio, label=f"Dahl, Lambda = {lam:g}")
-ax.plot(vr, limits.coulomb_friction_ratio(vr), "k--", label="Coulomb (2/pi) arcsin VR")
-ax.plot(vr, np.minimum(limits.dahl_small_lambda_friction_ratio(vr), 1), "k:",
+ax.plot(vr, idtool.coulomb_friction_ratio(vr), "k--", label="Coulomb (2/pi) arcsin VR")
+ax.plot(vr, np.minimum(idtool.dahl_small_lambda_friction_ratio(vr), 1), "k:",
         label="Dahl, Lambda -> 0")
 ax.set(xlabel="velocity ratio VR", ylabel="friction ratio FR")
 ax.legend(fontsize=8)
-fig.savefig("/tmp/idtool_nb01_curves.png", dpi=80)
+fig.savefig(out_dir / "curves.png", dpi=80)
+plt.show()
 
 # %% [markdown]
 # The notes' spot values, computed here and printed next to the stated ones:
@@ -89,24 +94,37 @@ run = idtool.simulate_transducer(p, vt, periods=6, steps_per_period=400)
 fig, ax = plt.subplots(figsize=(7, 3))
 ax.plot(np.asarray(run.time_s) * 1e6, np.asarray(run.friction_n) / float(p.fc_n))
 ax.set(xlabel="time [us]", ylabel="F_D / Fc")
-fig.savefig("/tmp/idtool_nb01_march.png", dpi=80)
+fig.savefig(out_dir / "march.png", dpi=80)
+plt.show()
 
 # %% [markdown]
 # ## 3. Section 3.6 sweeps (a subset, to keep the notebook quick)
+#
+# `idtool.seed_study` solves every steady state of the chosen figures in one compiled
+# call and returns a pandas table (one row per figure, swept value and VR).
 
 # %%
-from idtool._model._seed_study import SEED_FIGURES, seed_study  # noqa: E402
+figures = idtool.SEED_FIGURES[:2]
+print("figures:", [(f.figure, f.parameter, f.values) for f in figures])
+table = idtool.seed_study(velocity_ratios=np.linspace(0.05, 1.1, 8), figures=figures)
+print(table.groupby(["figure", "parameter", "value"]).friction_ratio.mean().round(3).to_string())
 
-table = seed_study(velocity_ratios=np.linspace(0.05, 1.1, 8), figures=SEED_FIGURES[:2])
-print(table.groupby(["figure", "value"]).friction_ratio.mean().round(3))
-fig, ax = plt.subplots(figsize=(6, 4))
-for value, g in table[table.figure == "fig8"].groupby("value"):
-    ax.plot(g.velocity_ratio, g.friction_ratio, marker=".", label=f"Fe = {value:g} N")
-ax.set(xlabel="VR", ylabel="FR", title="Figure 8: FR falls as Fe rises")
-ax.legend()
-fig.savefig("/tmp/idtool_nb01_fig8.png", dpi=80)
+# %%
+fig, axes = plt.subplots(1, len(figures), figsize=(5 * len(figures), 4), squeeze=False)
+for ax, f in zip(axes[0], figures, strict=True):
+    for value, g in table[table.figure == f.figure].groupby("value"):
+        ax.plot(g.velocity_ratio, g.friction_ratio, marker=".", label=f"{f.parameter} = {value:g}")
+    ax.plot(vr, idtool.coulomb_friction_ratio(vr), "k--", lw=0.8, label="Coulomb")
+    ax.set(xlabel="VR", ylabel="FR", title=f.figure)
+    ax.legend(fontsize=8)
+fig.tight_layout()
+fig.savefig(out_dir / "seed_study.png", dpi=80)
+plt.show()
 
 # %% [markdown]
+# Figure 8: the friction ratio falls as the excitation force Fe rises; Figure 9: it rises
+# with the friction coefficient mu.
+#
 # Gradients come for free: the sensitivity of FR to the contact stiffness at a
 # bench-like operating point.
 
@@ -117,3 +135,4 @@ def fr_of_kt(kt):
 
 
 print("dFR/dlog(Kt) =", float(jax.grad(lambda lk: fr_of_kt(jax.numpy.exp(lk)))(np.log(1e9))))
+print(sorted(f.name for f in out_dir.iterdir()))

@@ -137,7 +137,10 @@ def test_fit_predicts_in_memory_from_covariance_then_posterior():
     assert before.source == "fit covariance" and len(before) == 2
     frame = before.to_frame()
     assert list(frame["normal_load_n"]) == [450.0, 450.0]
-    assert "friction_ratio.median" in frame.columns
+    assert {"friction_ratio.median", "friction_ratio.ci95.lo", "friction_ratio.ci95.hi"} <= set(
+        frame.columns
+    )
+    assert (frame["friction_ratio.ci95.lo"] < frame["friction_ratio.median"]).all()
     far = fit.predict(900.0, 0.5)
     assert far.warnings and "outside the fitted range" in far.warnings[0]
     post = fit.sample(walkers=20, steps=200, seed=1)

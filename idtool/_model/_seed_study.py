@@ -94,17 +94,13 @@ def seed_study(
 
 def plot_seed_study(table: pd.DataFrame, out_dir, figures=SEED_FIGURES) -> list:
     """One PNG per figure: (a) FR and (b) PDR against VR, a curve per value."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from idtool._model._limits import coulomb_friction_ratio
+    from idtool._plotting import subplots
 
     paths = []
     for fig in figures:
         rows = table[table.figure == fig.figure]
-        f, (ax_fr, ax_pd) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+        f, (ax_fr, ax_pd) = subplots(1, 2, figsize=(10, 4), layout="constrained")
         for value, group in rows.groupby("value"):
             ax_fr.plot(group.velocity_ratio, group.friction_ratio, marker=".", label=f"{value:g}")
             ax_pd.plot(group.velocity_ratio, group.power_ratio, marker=".", label=f"{value:g}")
@@ -116,6 +112,5 @@ def plot_seed_study(table: pd.DataFrame, out_dir, figures=SEED_FIGURES) -> list:
         ax_pd.legend(title=fig.label)
         path = f"{out_dir}/{fig.figure}_{fig.parameter}.png"
         f.savefig(path, dpi=110)
-        plt.close(f)
         paths.append(path)
     return paths

@@ -120,15 +120,12 @@ def posterior_predictive(
 
 def plot_predictive(check: PredictiveCheck, trace_ids: tuple[str, ...], path: str | Path) -> Path:
     """``ppc.png``: every trace with its bands, and the autocorrelation check."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from idtool._plotting import subplots
 
     n = len(trace_ids)
     cols = 4
     rows = int(np.ceil((n + 1) / cols))
-    fig, axes = plt.subplots(rows, cols, figsize=(14, 2.3 * rows), squeeze=False)
+    fig, axes = subplots(rows, cols, figsize=(14, 2.3 * rows), squeeze=False)
     lo, hi = check.band
     mlo, mhi = check.model_band
     med = check.median
@@ -166,9 +163,6 @@ def plot_predictive(check: PredictiveCheck, trace_ids: tuple[str, ...], path: st
     fig.supylabel("force - posterior median [N] (block means)")
     fig.tight_layout(rect=(0, 0, 1, 0.98))
     path = Path(path)
-    try:
-        with atomic_file(path) as tmp:
-            fig.savefig(tmp, dpi=90, format="png")
-    finally:
-        plt.close(fig)
+    with atomic_file(path) as tmp:
+        fig.savefig(tmp, dpi=90, format="png")
     return path

@@ -56,10 +56,24 @@ class _Rows(Generic[R]):
         }
 
     def to_frame(self):
-        """A pandas DataFrame, one row per answer (nested fields flattened)."""
+        """A pandas DataFrame, one row per answer: nested fields as ``a.b`` columns,
+        each 95% interval as ``a.ci95.lo`` and ``a.ci95.hi``, out-of-reach values NaN."""
         import pandas as pd
 
-        return pd.json_normalize([r.to_dict() for r in self.rows])
+        return pd.DataFrame([_flat(r.to_dict()) for r in self.rows])
+
+
+def _flat(doc: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in doc.items():
+        name = prefix + key
+        if isinstance(value, dict):
+            out |= _flat(value, name + ".")
+        elif isinstance(value, list) and len(value) == 2:
+            out[name + ".lo"], out[name + ".hi"] = (np.nan if v is None else v for v in value)
+        else:
+            out[name] = np.nan if value is None else value
+    return out
 
 
 class Predictions(_Rows[Prediction]):

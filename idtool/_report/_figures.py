@@ -1,4 +1,4 @@
-"""Figures of the uncertainty report (PNG files; matplotlib is imported here only)."""
+"""Figures of the uncertainty report (PNG files; matplotlib is imported on first use)."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from idtool._plotting import subplots
 from idtool._predict._predict import Draws, amplitude_for_reduction, predict_friction_ratio
 
 __all__ = [
@@ -17,27 +18,16 @@ __all__ = [
 ]
 
 
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _save(plt, fig, path: Path, dpi: int = 90) -> Path:
+def _save(fig, path: Path, dpi: int = 90) -> Path:
     fig.tight_layout()
     fig.savefig(path, dpi=dpi)
-    plt.close(fig)
     return path
 
 
 def correlation_figure(names: list[str], matrix: np.ndarray, path: Path) -> Path:
     """Heat map of the fit's correlation matrix, values written in the cells."""
-    plt = _plt()
     n = len(names)
-    fig, ax = plt.subplots(figsize=(1.1 * n + 2, 1.0 * n + 1.5))
+    fig, ax = subplots(figsize=(1.1 * n + 2, 1.0 * n + 1.5))
     im = ax.imshow(matrix, vmin=-1, vmax=1, cmap="RdBu_r")
     ax.set_xticks(range(n), names, rotation=40, ha="right", fontsize=8)
     ax.set_yticks(range(n), names, fontsize=8)
@@ -45,14 +35,13 @@ def correlation_figure(names: list[str], matrix: np.ndarray, path: Path) -> Path
         for j in range(n):
             ax.text(j, i, f"{matrix[i, j]:+.2f}", ha="center", va="center", fontsize=7)
     fig.colorbar(im, ax=ax, shrink=0.8)
-    return _save(plt, fig, path)
+    return _save(fig, path)
 
 
 def corner_figure(values: dict[str, np.ndarray], names: list[str], path: Path) -> Path:
     """Corner plot: 1-D histograms on the diagonal, 2-D scatter below it."""
-    plt = _plt()
     n = len(names)
-    fig, axes = plt.subplots(n, n, figsize=(2.1 * n, 2.1 * n), squeeze=False)
+    fig, axes = subplots(n, n, figsize=(2.1 * n, 2.1 * n), squeeze=False)
     for i, yi in enumerate(names):
         for j, xj in enumerate(names):
             ax = axes[i, j]
@@ -71,19 +60,18 @@ def corner_figure(values: dict[str, np.ndarray], names: list[str], path: Path) -
             if j == 0 and i > 0:
                 ax.set_ylabel(yi, fontsize=8)
             ax.tick_params(labelsize=6)
-    return _save(plt, fig, path, dpi=80)
+    return _save(fig, path, dpi=80)
 
 
 def walker_figure(chains: dict[str, np.ndarray], names: list[str], path: Path) -> Path:
     """Every walker's path per parameter (``chains[name]`` is walkers x steps)."""
-    plt = _plt()
-    fig, axes = plt.subplots(len(names), 1, figsize=(10, 1.5 * len(names)), sharex=True)
+    fig, axes = subplots(len(names), 1, figsize=(10, 1.5 * len(names)), sharex=True)
     for ax, name in zip(np.atleast_1d(axes), names, strict=True):
         ax.plot(chains[name].T, lw=0.3, alpha=0.5, color="k")
         ax.set_ylabel(name, fontsize=8)
         ax.tick_params(labelsize=7)
     np.atleast_1d(axes)[-1].set_xlabel("step (after burn-in)")
-    return _save(plt, fig, path, dpi=80)
+    return _save(fig, path, dpi=80)
 
 
 def friction_ratio_figures(
@@ -91,7 +79,6 @@ def friction_ratio_figures(
 ) -> tuple[Path, Path]:
     """FR against amplitude (per load) and against load (per amplitude), median and 95%
     band, with the data's operating points (the fit's per-trace FR) marked."""
-    plt = _plt()
     loads = sorted({p["normal_load_n"] for p in points})
     alphas = sorted({p["amplitude_fraction"] for p in points})
     amp_grid = np.linspace(0.05, 1.0, 16)
@@ -118,7 +105,7 @@ def friction_ratio_figures(
 
     def panel(groups, x_grid, curve, key, x_key, label, xlabel, title, path):
         # One curve and band per group (a load, or an amplitude) against x_grid.
-        fig, ax = plt.subplots(figsize=(6, 4))
+        fig, ax = subplots(figsize=(6, 4))
         for c, value in enumerate(groups):
             med, lo, hi = curve(value)
             ax.fill_between(x_grid, lo, hi, color=f"C{c}", alpha=0.25)
@@ -126,7 +113,7 @@ def friction_ratio_figures(
             marks(ax, key, value, x_key)
         ax.set(xlabel=xlabel, ylabel="friction ratio FR", ylim=(0, 1.05))
         ax.legend(title=title)
-        return _save(plt, fig, path)
+        return _save(fig, path)
 
     p1 = panel(
         loads,
@@ -158,8 +145,7 @@ def amplitude_map_figure(
 ) -> tuple[Path, list]:
     """Amplitude needed for each target reduction against load, median and 95% band;
     loads where the target is out of reach are left blank and said so."""
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = subplots(figsize=(6, 4))
     rows = []
     for c, target in enumerate(targets):
         res = amplitude_for_reduction(draws, target, loads, [speed_m_s])
@@ -173,4 +159,4 @@ def amplitude_map_figure(
     ax.axhline(1.0, color="k", lw=0.8, ls="--")
     ax.set(xlabel="normal load [N]", ylabel="amplitude fraction needed", ylim=(0, 1.1))
     ax.legend()
-    return _save(plt, fig, path), rows
+    return _save(fig, path), rows

@@ -188,10 +188,7 @@ def fit_report(run: FitRun) -> str:
 
 def plot_fit(run: FitRun, out_dir: str | Path) -> list[Path]:
     """``traces.png`` (data and fit), ``residuals.png`` and, if profiled, ``profile.png``."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from idtool._plotting import subplots
 
     r, d = run.chosen, run.data
     out = Path(out_dir)
@@ -199,7 +196,7 @@ def plot_fit(run: FitRun, out_dir: str | Path) -> list[Path]:
     resid = d.force_n - pred
     cols = 4
     rows = int(np.ceil(d.n_traces / cols))
-    fig, axes = plt.subplots(rows, cols, figsize=(14, 2.2 * rows), sharex=False, squeeze=False)
+    fig, axes = subplots(rows, cols, figsize=(14, 2.2 * rows), sharex=False, squeeze=False)
     # Fixed margins rather than tight_layout, and few ticks: laying out and ticking 24
     # panels was 2 of the 3 s this figure took, most of a repeated fit's time.
     top = 1.0 - 0.35 / (2.2 * rows)
@@ -220,10 +217,9 @@ def plot_fit(run: FitRun, out_dir: str | Path) -> list[Path]:
     fig.supylabel("force [N] (block means)", fontsize=9)
     paths = [out / "traces.png"]
     fig.savefig(paths[-1], dpi=90)
-    plt.close(fig)
 
     w = np.asarray(_residuals(r.model, jnp.asarray(r.z), r.phi))
-    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(14, 3.5))
+    fig, (a1, a2, a3) = subplots(1, 3, figsize=(14, 3.5))
     for i in range(d.n_traces):
         sel = d.block_trace == i
         a1.plot(d.block_time_s[sel], resid[sel], lw=0.5)
@@ -243,11 +239,10 @@ def plot_fit(run: FitRun, out_dir: str | Path) -> list[Path]:
     fig.tight_layout()
     paths.append(out / "residuals.png")
     fig.savefig(paths[-1], dpi=90)
-    plt.close(fig)
 
     if run.profiles:
         n = len(run.profiles)
-        fig, axes = plt.subplots(1, n, figsize=(3.5 * n, 3), squeeze=False)
+        fig, axes = subplots(1, n, figsize=(3.5 * n, 3), squeeze=False)
         for ax, prof in zip(axes.flat, run.profiles.values(), strict=True):
             ax.plot(prof.values, prof.delta, marker="o")
             ax.axhline(3.84, color="C3", ls="--", lw=0.8)
@@ -255,5 +250,4 @@ def plot_fit(run: FitRun, out_dir: str | Path) -> list[Path]:
         fig.tight_layout()
         paths.append(out / "profile.png")
         fig.savefig(paths[-1], dpi=90)
-        plt.close(fig)
     return paths
