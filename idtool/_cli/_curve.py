@@ -7,6 +7,7 @@ Dimensionless: the prescribed-vibration contact with a = 1, w = 1, Fc = 1, so
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 
 import jax.numpy as jnp
@@ -14,7 +15,7 @@ import numpy as np
 
 from idtool._errors import IdtoolError
 from idtool._model._contact import cycle_average_curve
-from idtool._model._laws import AbstractFrictionLaw, Coulomb, Dahl, LuGre
+from idtool._model._laws import FRICTION_LAWS, AbstractFrictionLaw
 
 __all__ = ["dimensionless_law", "friction_curve", "parse_number_list", "register"]
 
@@ -50,15 +51,16 @@ def dimensionless_law(
     For LuGre: ``fs_ratio`` = Fs/Fc, ``stribeck_vr`` = Vs/(a w), ``s1`` = sigma1 w / Kt,
     ``s2`` = sigma2 a w / Fc.
     """
-    if name == "coulomb":
-        return Coulomb(fc_n=1.0)
-    if name == "dahl":
-        return Dahl(fc_n=1.0, kt_n_m=lam)
-    if name == "lugre":
-        return LuGre(
-            fc_n=1.0, kt_n_m=lam, fs_n=fs_ratio, vs_m_s=stribeck_vr, s1_n_s_m=s1 * lam, s2_n_s_m=s2
-        )
-    raise IdtoolError(f"--law {name!r}: choose coulomb, dahl or lugre")
+    # The registered law from its fit parameters, at unit load with mu = 1 (Fc = 1).
+    values = {"mu": 1.0, "Kt": lam, "static_ratio": fs_ratio, "stribeck_velocity_m_s": stribeck_vr}
+    law = FRICTION_LAWS.get(name).at_load({k: jnp.asarray(v) for k, v in values.items()}, 1.0)
+    if s1 or s2:  # LuGre's damping terms, which the fit does not identify
+        damping = {"s1_n_s_m": s1 * lam, "s2_n_s_m": s2}
+        try:
+            law = dataclasses.replace(law, **damping)  # type: ignore[arg-type]
+        except TypeError:
+            raise IdtoolError(f"--s1 and --s2 apply to LuGre, not to {name}") from None
+    return law
 
 
 def friction_curve(law: AbstractFrictionLaw, vr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -100,7 +102,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "contact whose slip is sliding at v plus a sinusoid of amplitude a, against the "
         "velocity ratio VR = v / (a w) (model notes §3-4).",
     )
-    p.add_argument("--law", choices=("coulomb", "dahl", "lugre"), default="dahl")
+    p.add_argument("--law", choices=FRICTION_LAWS.names(), default="dahl")
     p.add_argument("--vr", default="0.1,0.3,0.5,0.7,0.9", help="0.1,0.5,0.9 or start:stop:count")
     p.add_argument(
         "--lambda", dest="lam", type=float, default=5.0, help="Lambda = Kt a / Fc (default 5)"
