@@ -52,3 +52,16 @@ def small_fit(seed: int) -> tuple[idtool.Dataset, FitRun]:
     """The simulated dataset of ``seed`` and its fit (cached for the whole session)."""
     dataset, _ = idtool.simulate_bench(small_params(), seed=seed)
     return dataset, fit_dataset(dataset, seed=0)
+
+
+def two_trace_data():
+    """Block means of two short traces at one operating point (450 N, 50%; ON 0.5 s and
+    1 s): small enough for dense-matrix checks of the likelihood algebra."""
+    from idtool._data._blocks import prepare_fit_data
+
+    params = json.loads(idtool.example_params_path().read_text())
+    e = params["experiments"]
+    e.update(normal_loads_n=[450.0], amplitude_fractions=[0.5], on_durations_s=[0.5, 1.0])
+    e.update(sliding_before_s=1.0, sliding_after_s=1.0)
+    dataset, _ = idtool.simulate_bench(params, seed=2)
+    return prepare_fit_data(dataset, periods_per_block=2)

@@ -1,17 +1,16 @@
 """Priors, transforms and noise densities against independent values (SciPy, autodiff,
 dense linear algebra): the pieces of the log-posterior one by one."""
 
-import json
 import math
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from sample_helpers import two_trace_data
 from scipy import stats
 
 import idtool
-from idtool._data._blocks import prepare_fit_data
 from idtool._model._benchmodel import bench_model
 from idtool._model._noise import NOISE_MODELS, whiten
 from idtool._posterior._likelihood import (
@@ -98,12 +97,7 @@ def test_student_t_innovations_are_scipys(noise):
 def test_student_t_marginal_likelihood_is_its_laplace_approximation():
     """The Student-t marginal likelihood (nuisances profiled, Gaussian curvature with the
     t's Fisher information) against the same quantities from dense NumPy algebra."""
-    params = json.loads(idtool.example_params_path().read_text())
-    e = params["experiments"]
-    e.update(normal_loads_n=[450.0], amplitude_fractions=[0.5], on_durations_s=[0.5, 1.0])
-    e.update(sliding_before_s=1.0, sliding_after_s=1.0)
-    dataset, _ = idtool.simulate_bench(params, seed=2)
-    data = prepare_fit_data(dataset, periods_per_block=2)
+    data = two_trace_data()
     model = bench_model(data, coupling="constant", noise="student-t")
     z = model.z0(Kt=1e9, coupling_gain=0.02)
     table = {p.name: default_prior(p) for p in sampled_params(model)}

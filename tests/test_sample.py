@@ -17,11 +17,11 @@ from sample_helpers import (
     small_params,
     true_friction_ratio,
     truth,
+    two_trace_data,
 )
 
 import idtool
 import idtool._fit._fit
-from idtool._data._blocks import prepare_fit_data
 from idtool._errors import IdtoolError
 from idtool._fit._run import fit_dataset
 from idtool._model._benchmodel import bench_model
@@ -222,12 +222,7 @@ def test_corrupt_chain_is_refused(tmp_path):
 def test_marginal_likelihood_equals_the_dense_gaussian_integral():
     """The per-trace Cholesky algebra against log N(w; 0, sigma^2 I + s^2 J_w J_w^T)
     on whitened residuals (two traces, so the dense matrix is small)."""
-    params = json.loads(idtool.example_params_path().read_text())
-    e = params["experiments"]
-    e.update(normal_loads_n=[450.0], amplitude_fractions=[0.5], on_durations_s=[0.5, 1.0])
-    e.update(sliding_before_s=1.0, sliding_after_s=1.0)
-    dataset, _ = idtool.simulate_bench(params, seed=2)
-    data = prepare_fit_data(dataset, periods_per_block=2)
+    data = two_trace_data()
     model = bench_model(data, coupling="constant")
     z = model.z0(Kt=1e9, coupling_gain=0.02)
     table = {p.name: default_prior(p) for p in sampled_params(model)}
