@@ -27,6 +27,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_curve.py
 	$(BIN)/python benchmarks/bench_fit.py
 	$(BIN)/python benchmarks/bench_sample.py
+	$(BIN)/python benchmarks/bench_first_result.py
 
 clean-venv:
 	rm -rf $(VENV)
