@@ -28,7 +28,7 @@ from idtool._fit._store import StoredFit, load_stored_fit, save_fit_state
 from idtool._model._benchmodel import BenchModel
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._posterior._sample import Posterior, sample_posterior
-from idtool._posterior._store import POSTERIOR_FILE, PosteriorDraws, load_posterior
+from idtool._posterior._store import POSTERIOR_FILE, load_posterior
 from idtool._predict._predict import (
     Draws,
     draws_from_covariance,
@@ -65,9 +65,6 @@ class Fit:
         self.folder = folder
         self.posterior: Posterior | None = None
         self.seconds = 0.0  # time the fit took [s]
-        self._stored_posterior: PosteriorDraws | None = None
-        if folder is not None and (folder / POSTERIOR_FILE).is_file():
-            self._stored_posterior = load_posterior(folder / POSTERIOR_FILE)
 
     # ------------------------------------------------------------------ what it found
     @property
@@ -185,8 +182,9 @@ class Fit:
         ``posterior.nc`` beside a loaded fit), else Gaussian on the fit's covariance."""
         if self.posterior is not None:
             return draws_from_posterior(self.posterior, self.model, max_draws)
-        if self._stored_posterior is not None:
-            return draws_from_stored(self._stored_posterior, self.model, max_draws)
+        if self.folder is not None and (self.folder / POSTERIOR_FILE).is_file():
+            stored = load_posterior(self.folder / POSTERIOR_FILE)
+            return draws_from_stored(stored, self.model, max_draws)
         return draws_from_covariance(self.model, self.z, self.cov_z, max_draws, seed)
 
     # ------------------------------------------------------------------ predictions

@@ -119,9 +119,9 @@ def _unwhiten(w: np.ndarray, phi: float, data: FitData) -> np.ndarray:
     """Residuals ``e`` from AR(1)-whitened ones (inverse of BenchModel.residuals'
     whitening): ``e_1 = w_1 / sqrt(1 - phi^2)``, ``e_t = w_t + phi e_(t-1)``."""
     e = np.array(w, float)
-    starts = set(np.asarray(data.first_block).tolist())
+    first = np.asarray(data.first)
     for t in range(e.size):
-        if t in starts:
+        if first[t]:
             e[t] = w[t] / math.sqrt(1.0 - phi**2)
         else:
             e[t] = w[t] + phi * e[t - 1]
@@ -258,7 +258,7 @@ def fit_model(
     phi = 0.0
     for _ in range(3 if model.noise.autoregressive else 0):
         e = _unwhiten(np.asarray(best.residuals), phi, data)
-        new_phi = model.noise.estimate_phi(e, data.first_block)
+        new_phi = model.noise.estimate_phi(e, data.first)
         # Stop once phi settles (the estimates then move far less than their errors);
         # phi stays the one the parameters were fitted with.
         if abs(new_phi - phi) < 0.02:

@@ -78,7 +78,7 @@ class BenchModel(eqx.Module):
     @property
     def shared_params(self) -> tuple[Param, ...]:
         """Shared parameters, physical first (module docstring)."""
-        return (*self.law.fit_params, MU, *self.coupling.fit_params, *BENCH_PARAMS)
+        return _shared_params(self.law, self.coupling)
 
     @property
     def params(self) -> tuple[Param, ...]:
@@ -254,6 +254,12 @@ class BenchModel(eqx.Module):
         return r, t.T @ jtj_u @ t, t.T @ jtr_u, (lv, dlv)
 
 
+def _shared_params(
+    law: type[AbstractFrictionLaw], coupling: type[AbstractCoupling]
+) -> tuple[Param, ...]:
+    return (*law.fit_params, MU, *coupling.fit_params, *BENCH_PARAMS)
+
+
 def _add_trailing(per_trace: ArrayLike, shift: ArrayLike, extra: int) -> Array:
     """``per_trace + shift`` with ``per_trace`` (traces,) and ``shift`` (traces,) or
     (traces, *batch): the result carries ``extra`` trailing axes."""
@@ -278,7 +284,7 @@ def bench_model(
     coupling_cls = COUPLINGS.get(coupling)
     noise_cls = NOISE_MODELS.get(noise)
     s = start_values(data)
-    shared = (*law_cls.fit_params, MU, *coupling_cls.fit_params, *BENCH_PARAMS)
+    shared = _shared_params(law_cls, coupling_cls)
     guess = {
         "mu": s.friction_coefficient,
         "slope_n_s": s.slope_n_s,

@@ -64,12 +64,10 @@ def whiten(e: Array, first: Array, phi) -> Array:
 
 
 def ar1_coefficient(e: np.ndarray, first: np.ndarray) -> float:
-    """Pooled lag-1 autocorrelation of residuals ``e`` within traces (``first`` marks
+    """Pooled lag-1 autocorrelation of residuals ``e`` within traces (``first``: True at
     each trace's first block), clipped to [-0.99, 0.99]."""
     e = np.asarray(e)
-    is_first = np.zeros(e.size, bool)
-    is_first[np.asarray(first)] = True
-    num = np.sum((e[1:] * e[:-1])[~is_first[1:]])
+    num = np.sum((e[1:] * e[:-1])[~np.asarray(first)[1:]])
     return float(np.clip(num / np.sum(e**2), -0.99, 0.99))
 
 

@@ -106,8 +106,3 @@ class Param:
             u = float(np.clip((value - self.lo) / (self.hi - self.lo), 1e-12, 1 - 1e-12))
             return math.atanh(2.0 * u - 1.0)
         return (value - self.centre) / self.scale
-
-    def describe_range(self) -> str:
-        if self.bounded:
-            return f"[{self.lo:g}, {self.hi:g}] {self.unit}"
-        return f"{self.centre:g} +/- {self.scale:g} {self.unit} per internal unit"
