@@ -89,6 +89,11 @@ class Fit:
         return self._state.sigma_n
 
     @property
+    def levels(self):
+        """The levels model's (free levels, sds), or None (``variability=False``)."""
+        return self._state.levels
+
+    @property
     def estimates(self) -> dict[str, Estimate]:
         if isinstance(self._state, FitResult):
             return self._state.estimates
@@ -181,11 +186,15 @@ class Fit:
         """Draws of the physical parameters: the posterior's if sampled (in memory or
         ``posterior.nc`` beside a loaded fit), else Gaussian on the fit's covariance."""
         if self.posterior is not None:
-            return draws_from_posterior(self.posterior, self.model, max_draws)
+            return draws_from_posterior(
+                self.posterior, self.model, max_draws, self._state.sd_grids, seed
+            )
         if self.folder is not None and (self.folder / POSTERIOR_FILE).is_file():
             stored = load_posterior(self.folder / POSTERIOR_FILE)
-            return draws_from_stored(stored, self.model, max_draws)
-        return draws_from_covariance(self.model, self.z, self.cov_z, max_draws, seed)
+            return draws_from_stored(stored, self.model, max_draws, self._state.sd_grids, seed)
+        return draws_from_covariance(
+            self.model, self.z, self.cov_z, max_draws, seed, self._state.sd_grids
+        )
 
     # ------------------------------------------------------------------ predictions
     def predict(
@@ -273,7 +282,8 @@ def fit(
     starts: int = 8,
     compare_laws: bool = False,
     profile: bool = False,
-    mains_hz: float = 50.0,
+    mains_hz: float | None = None,
+    variability: bool = True,
 ) -> Fit:
     """Identify Kt, mu and the coupling from every trace of ``dataset`` at once.
 
@@ -287,7 +297,14 @@ def fit(
         starts: multi-start points.
         compare_laws: also fit every other friction law and rank them by BIC.
         profile: profile-likelihood intervals of the physical parameters.
-        mains_hz: mains frequency [Hz]: block means span whole mains periods.
+        mains_hz: mains frequency [Hz]: block means span whole mains periods. None
+            (default): ``rig.mains_frequency_hz`` of the dataset, else the hum found in
+            the traces, else 50 Hz; the choice and its source are in ``fit.json``
+            (``noise.mains_hz``, ``noise.mains_source``), a doubt in ``Fit.warnings``.
+        variability: pull-to-pull scatter (of mu and of the friction ratio) and the
+            physical model's discrepancy across operating points in every interval and
+            band (default; estimated by REML, reported in ``fit.json``'s
+            ``variability``). False gives the noise-only model, for comparison.
     """
     if starts < 1:
         raise IdtoolError(f"starts = {starts}: give at least 1")
@@ -304,6 +321,7 @@ def fit(
         profile=profile,
         mains_hz=mains_hz,
         noise=noise,
+        variability=variability,
     )
     out = Fit(dataset, run.chosen, run)
     out.seconds = time.perf_counter() - started

@@ -149,7 +149,9 @@ def test_fit_predicts_in_memory_from_covariance_then_posterior():
     same = post.predict(450.0, [0.5, 0.7])
     assert [p.median for p in same] == [p.median for p in after]
     idata = post.to_arviz()
-    assert set(idata.posterior.data_vars) >= {"Kt", "mu", "sigma_n", "phi"}
+    # the levels model's sds when the fit has them, else the noise model's parameters
+    extra = {"scatter_mu", "discrepancy_fr"} if fit.levels is not None else {"sigma_n", "phi"}
+    assert set(idata.posterior.data_vars) >= {"Kt", "mu"} | extra
     need = post.amplitude_for(40.0, [270.0, 670.0])
     assert [a.normal_load_n for a in need] == [270.0, 670.0]
 

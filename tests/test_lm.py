@@ -73,7 +73,9 @@ def test_normal_equations_equal_the_dense_jacobians_for_the_bench_model():
     np.testing.assert_allclose(jtr, jac.T @ fn(z), rtol=1e-9, atol=1e-9 * np.max(np.abs(jtr)))
     assert structure.seeds.shape[0] == model.n_shared + 4  # 10, not 102
     # What the fit uses: the chain rule through the per-trace levels (8 JVPs).
-    r2, jtj2, jtr2, (levels, dlevels) = jax.jit(lambda m, zz: m.normal_equations(zz, 0.5))(model, z)
+    r2, jtj2, jtr2, (levels, dlevels, *_) = jax.jit(lambda m, zz: m.normal_equations(zz, 0.5))(
+        model, z
+    )
     np.testing.assert_allclose(r2, fn(z), rtol=1e-12, atol=1e-10)
     assert np.max(np.abs(jtj2 - jac.T @ jac) / scale) < 1e-9
     np.testing.assert_allclose(jtr2, jac.T @ fn(z), rtol=1e-8, atol=1e-9 * np.max(np.abs(jtr)))

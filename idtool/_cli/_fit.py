@@ -24,6 +24,7 @@ def _run(args: argparse.Namespace) -> int:
         law=args.law,
         coupling=args.coupling,
         noise=args.noise,
+        variability=args.variability == "on",
         seed=args.seed,
         starts=args.starts,
         compare_laws=args.compare_laws,
@@ -66,12 +67,25 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=DEFAULT_NOISE,
         help=f"noise model of the block means (default {DEFAULT_NOISE})",
     )
+    p.add_argument(
+        "--variability",
+        choices=("on", "off"),
+        default="on",
+        help="pull-to-pull scatter and operating-point discrepancy in the intervals and "
+        "bands (default on; off gives the noise-only model, for comparison)",
+    )
     p.add_argument("--compare-laws", action="store_true", help="also fit and rank LuGre/Dahl")
     p.add_argument(
         "--profile", action="store_true", help="profile likelihood of each physical parameter"
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the multi-start points")
     p.add_argument("--starts", type=int, default=8, help="multi-start points (default 8)")
-    p.add_argument("--mains-hz", type=float, default=50.0, help="mains frequency (50 or 60)")
+    p.add_argument(
+        "--mains-hz",
+        type=float,
+        default=None,
+        help="mains frequency [Hz] (50 or 60); default: rig.mains_frequency_hz of the "
+        "dataset, else the hum found in the traces, else 50",
+    )
     p.add_argument("--force", action="store_true", help="replace an existing --out")
     p.set_defaults(func=_run)

@@ -49,7 +49,7 @@ def _run(args: argparse.Namespace) -> int:
     fit = idtool.load_fit(args.fit)
     draws = fit.draws(args.draws, args.seed)
     doc: dict = {"source": draws.source, "note": draws.note, "n_draws": draws.n}
-    lines = [f"predictions from the {draws.note}"]
+    lines = [f"draws: {draws.note}"]
     notes: list[str] = []
     if args.amplitude is not None:
         preds = fit.predict(
@@ -57,16 +57,21 @@ def _run(args: argparse.Namespace) -> int:
         )
         doc["predictions"] = [p.to_dict() for p in preds]
         notes += preds.warnings
-        lines.append(
-            f"{'load [N]':>9s} {'amplitude':>9s} {'speed':>8s}   {'FR median [95%]':28s}"
-            f"reduction % median [95%]"
-        )
+        lines += [
+            "mean FR: what pulls at this operating point average to (use it for the "
+            "design curve); next pull: where a single new pull will land (use it for "
+            "acceptance limits)",
+            f"{'load [N]':>9s} {'amplitude':>9s} {'speed':>8s}   {'mean FR [95%]':27s}"
+            f"{'next pull FR [95%]':27s}reduction % [95%]",
+        ]
         for p in preds:
             red, (rlo, rhi) = p.reduction_percent
             fr = f"{p.median:.4f} [{p.ci95[0]:.4f}, {p.ci95[1]:.4f}]"
+            nmed, (nlo, nhi) = p.new_trace or (p.median, p.ci95)
+            new = f"{nmed:.4f} [{nlo:.4f}, {nhi:.4f}]"
             lines.append(
                 f"{p.normal_load_n:9g} {p.amplitude_fraction:9g} {p.pull_speed_m_s:8g}   "
-                f"{fr:28s}{red:.1f} [{rlo:.1f}, {rhi:.1f}]"
+                f"{fr:27s}{new:27s}{red:.1f} [{rlo:.1f}, {rhi:.1f}]"
             )
     if args.target_reduction is not None:
         inverse = fit.amplitude_for(

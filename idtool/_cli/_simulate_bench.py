@@ -30,6 +30,11 @@ def _run(args: argparse.Namespace) -> int:
             f"{t.id:<18} {t.friction_ratio:>6.3f} {t.dimensionless_stiffness:>7.2f} "
             f"{vr:>6}  {'yes' if t.reaches_on_level else 'no'}"
         )
+    if not params.coupling.in_fit:
+        print(
+            f"coupling law '{params.coupling.law}' is truth only: idtool fit has no such law, "
+            "so a fit of this dataset is deliberately misspecified"
+        )
     return 0
 
 

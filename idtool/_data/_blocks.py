@@ -1,10 +1,15 @@
-"""Bench traces prepared for fitting: block means over one mains period, and start values.
+"""Bench traces prepared for fitting: block means over whole mains periods, and start values.
 
-Averaging each trace over blocks of one mains period (20 ms at 50 Hz) removes the hum
-exactly (a sinusoid averages to zero over its period), cuts the white noise by
+Averaging each trace over blocks of whole mains periods (2 x 20 ms at 50 Hz) removes the
+hum exactly (a sinusoid averages to zero over its period), cuts the white noise by
 sqrt(block size), and leaves a residual series whose correlation the fit models as
 AR(1). The model is averaged over the same blocks (at ``sub_samples`` points inside
 each block), so the comparison stays exact at the corners of the trace too.
+
+A block must span a whole number of samples too: at 1 kHz and 60 Hz a period is 16.7
+samples, so :func:`block_layout` takes the smallest number of periods, from the one
+asked for, that is a whole number of samples at every trace's sample rate (3 periods =
+50 samples there; 2 periods = 40 samples at 1 kHz and 50 Hz).
 """
 
 from __future__ import annotations
@@ -17,7 +22,24 @@ import numpy as np
 from idtool._data._dataset import Dataset
 from idtool._errors import IdtoolError, Problem
 
-__all__ = ["FitData", "StartValues", "prepare_fit_data", "start_values"]
+__all__ = [
+    "BlockLayout",
+    "FitData",
+    "StartValues",
+    "block_layout",
+    "prepare_fit_data",
+    "residual_hum_fraction",
+    "start_values",
+]
+
+# A block may miss a whole number of mains periods by at most this fraction of one period:
+# the hum left in its mean is then below about 0.5% / periods of the hum's amplitude.
+# (2 kHz at 60 Hz: 2 periods = 66.67 samples; 67 samples miss by 1% of a period and are
+# refused, 3 periods = 100 samples are taken.)
+PERIOD_TOLERANCE = 0.005
+# Periods searched beyond the requested number before settling for the best miss:
+# longer blocks would blur the ON dips (0.3 s long on the bench).
+MAX_EXTRA_PERIODS = 4
 
 
 class FitData(eqx.Module):
@@ -30,6 +52,14 @@ class FitData(eqx.Module):
     ``op_*`` are the distinct operating points (load [N], amplitude fraction, speed
     [m/s]) and ``op_index`` each trace's row among them: repeated traces share one
     contact solve.
+
+    The blocks: ``block_size`` samples (of the first trace; a trace at another sample
+    rate has its own count spanning the same periods), ``block_s`` their real duration
+    [s], ``periods_per_block`` whole periods of the ``mains_hz`` [Hz] mains, chosen from
+    ``periods_requested`` on (:func:`block_layout`); ``mains_source`` says where the
+    frequency came from ("argument", "rig", "detected", "default");
+    ``residual_hum_fraction`` is the largest fraction of a hum's amplitude a block mean
+    keeps (0 for whole periods); ``notes`` are plain sentences for the fit report.
     """
 
     name: str = eqx.field(static=True)
@@ -38,6 +68,11 @@ class FitData(eqx.Module):
     block_size: int = eqx.field(static=True)
     block_s: float = eqx.field(static=True)
     mains_hz: float = eqx.field(static=True)
+    periods_per_block: int = eqx.field(static=True)
+    periods_requested: int = eqx.field(static=True)
+    mains_source: str = eqx.field(static=True)
+    residual_hum_fraction: float = eqx.field(static=True)
+    notes: tuple[str, ...] = eqx.field(static=True)
     normal_load_n: np.ndarray
     amplitude_fraction: np.ndarray
     pull_speed_m_s: np.ndarray
@@ -65,17 +100,151 @@ class FitData(eqx.Module):
         return int(self.force_n.size)
 
 
+@dataclasses.dataclass(frozen=True)
+class BlockLayout:
+    """How long the blocks are: whole mains periods, and samples at each sample rate.
+
+    Attributes:
+        periods: mains periods per block.
+        samples: samples per block, one per entry of ``sample_rates_hz``.
+        sample_rates_hz: the distinct sample rates [Hz] it was made for.
+        period_miss: largest distance of a block from ``periods`` whole periods, in
+            periods (0 when the samples make whole periods exactly).
+        residual_hum_fraction: largest fraction of a hum's amplitude a block mean keeps.
+        whole: whether ``period_miss`` is within :data:`PERIOD_TOLERANCE`.
+    """
+
+    periods: int
+    samples: tuple[int, ...]
+    sample_rates_hz: tuple[float, ...]
+    period_miss: float
+    residual_hum_fraction: float
+    whole: bool
+
+
+def residual_hum_fraction(block_samples: int, sample_rate_hz: float, mains_hz: float) -> float:
+    """Largest block mean of a unit-amplitude sinusoid at ``mains_hz`` [Hz] sampled at
+    ``sample_rate_hz`` [Hz], over blocks of ``block_samples`` samples (any phase) [-].
+
+    The mean of ``sin(theta k + phase)`` over ``n`` samples has amplitude
+    ``|sin(n theta / 2)| / (n |sin(theta / 2)|)`` (the Dirichlet kernel): 0 for whole
+    periods, 1 when the hum aliases onto a constant.
+    """
+    half = np.pi * mains_hz / sample_rate_hz
+    denominator = block_samples * abs(np.sin(half))
+    if denominator < 1e-12 * block_samples:
+        return 1.0
+    return float(abs(np.sin(block_samples * half)) / denominator)
+
+
+def block_layout(
+    sample_rates_hz: tuple[float, ...] | list[float], mains_hz: float, periods_per_block: int
+) -> BlockLayout:
+    """The smallest number of mains periods, from ``periods_per_block`` on, whose
+    blocks are whole numbers of samples at every sample rate [Hz] (to within
+    :data:`PERIOD_TOLERANCE` of a period).
+
+    Searched up to ``periods_per_block + MAX_EXTRA_PERIODS``; if no count fits, the one
+    missing whole periods least (``whole`` is then False and the residual hum says how
+    much of the hum stays in the block means).
+    """
+    rates = tuple(float(r) for r in np.unique(np.asarray(sample_rates_hz, float)))
+    best: BlockLayout | None = None
+    for periods in range(periods_per_block, periods_per_block + MAX_EXTRA_PERIODS + 1):
+        exact = [periods * fs / mains_hz for fs in rates]  # samples of whole periods
+        samples = tuple(max(1, round(x)) for x in exact)
+        miss = max(
+            abs(n - x) * mains_hz / fs for n, x, fs in zip(samples, exact, rates, strict=True)
+        )
+        layout = BlockLayout(
+            periods=periods,
+            samples=samples,
+            sample_rates_hz=rates,
+            period_miss=float(miss),
+            residual_hum_fraction=0.0
+            if miss < 1e-9  # whole periods: 0, not the sine's rounding error
+            else max(
+                residual_hum_fraction(n, fs, mains_hz) for n, fs in zip(samples, rates, strict=True)
+            ),
+            whole=bool(miss <= PERIOD_TOLERANCE),
+        )
+        if layout.whole:
+            return layout
+        if best is None or layout.period_miss < best.period_miss:
+            best = layout
+    assert best is not None
+    return best
+
+
+def _layout_note(layout: BlockLayout, mains_hz: float, requested: int) -> str | None:
+    """A sentence for the fit report when the blocks are not whole mains periods."""
+    if layout.whole:
+        return None
+    rates = ", ".join(
+        f"{n} samples at {fs:g} Hz"
+        for n, fs in zip(layout.samples, layout.sample_rates_hz, strict=True)
+    )
+    return (
+        f"no block of {requested} to {requested + MAX_EXTRA_PERIODS} periods of the "
+        f"{mains_hz:g} Hz mains is a whole number of samples; the blocks ({rates}) miss "
+        f"{layout.periods} whole periods by up to {layout.period_miss:.3f} of a period, so up "
+        f"to {100 * layout.residual_hum_fraction:.2g}% of the hum's amplitude stays in each "
+        "block mean"
+    )
+
+
+def _rate_groups(dataset: Dataset) -> str:
+    """'1000 Hz: a.csv, b.csv; 2000 Hz: c.csv' for a message."""
+    groups: dict[str, list[str]] = {}
+    for tr in dataset.traces:
+        groups.setdefault(f"{tr.sample_rate_hz:g} Hz", []).append(tr.file)
+    return "; ".join(f"{rate}: {', '.join(files)}" for rate, files in groups.items())
+
+
 def prepare_fit_data(
-    dataset: Dataset, mains_hz: float = 50.0, periods_per_block: int = 1, sub_samples: int = 4
+    dataset: Dataset,
+    mains_hz: float = 50.0,
+    periods_per_block: int = 1,
+    sub_samples: int = 4,
+    *,
+    mains_source: str = "argument",
 ) -> FitData:
-    """Cut every trace into blocks of ``periods_per_block`` mains periods and average them."""
+    """Cut every trace into blocks of whole mains periods and average them.
+
+    ``mains_hz`` [Hz] is the mains frequency; each block spans the smallest number of
+    its periods, from ``periods_per_block`` on, that is also a whole number of samples
+    (:func:`block_layout`); traces at different sample rates get blocks of the same
+    periods. ``mains_source`` is recorded in the :class:`FitData` (where ``mains_hz``
+    came from). At 1 kHz and 50 Hz, 2 periods are 40 samples, as they always were.
+
+    Raises:
+        IdtoolError: a trace is too short or has several ON windows; ``mains_hz`` or
+            ``periods_per_block`` is not positive.
+    """
+    if not (np.isfinite(mains_hz) and mains_hz > 0):
+        raise IdtoolError(f"mains frequency {mains_hz!r} Hz: give a positive number (50 or 60)")
+    if isinstance(periods_per_block, bool) or int(periods_per_block) != periods_per_block:
+        raise IdtoolError(f"periods_per_block = {periods_per_block!r}: give a whole number >= 1")
+    periods_per_block = int(periods_per_block)
+    if periods_per_block < 1:
+        raise IdtoolError(f"periods_per_block = {periods_per_block}: give a whole number >= 1")
+    layout = block_layout([tr.sample_rate_hz for tr in dataset.traces], mains_hz, periods_per_block)
+    if len(layout.sample_rates_hz) > 1 and not layout.whole:
+        raise IdtoolError(
+            f"{dataset.name}: the traces have different sample rates ({_rate_groups(dataset)}) "
+            f"and no block of {periods_per_block} to {periods_per_block + MAX_EXTRA_PERIODS} "
+            f"periods of the {mains_hz:g} Hz mains is a whole number of samples at all of "
+            "them: resample the traces to one sample rate"
+        )
+    size_of = dict(zip(layout.sample_rates_hz, layout.samples, strict=True))
     problems = []
     loads, alphas, speeds, starts, ends = [], [], [], [], []
     block_time, sub_time, force = [], [], []
-    block_sizes = []
+    block_sizes, block_durations = [], []
     for tr in dataset.traces:
-        bs = max(1, round(periods_per_block * tr.sample_rate_hz / mains_hz))
+        bs = size_of[float(tr.sample_rate_hz)]
         block_sizes.append(bs)
+        block_durations.append(bs / tr.sample_rate_hz)
         nb = tr.time_s.size // bs
         if nb < 10:
             problems.append(
@@ -135,8 +304,15 @@ def prepare_fit_data(
         op_alpha=unique[:, 1],
         op_speed_m_s=unique[:, 2],
         block_size=block_sizes[0],
-        block_s=periods_per_block / mains_hz,
+        # The real duration (samples / rate) of the first trace's blocks, to 12 digits:
+        # the rate is one over a median time step, exact to about 1e-15 only.
+        block_s=float(f"{block_durations[0]:.12g}"),
         mains_hz=float(mains_hz),
+        periods_per_block=layout.periods,
+        periods_requested=periods_per_block,
+        mains_source=mains_source,
+        residual_hum_fraction=layout.residual_hum_fraction,
+        notes=tuple(n for n in [_layout_note(layout, mains_hz, periods_per_block)] if n),
     )
 
 

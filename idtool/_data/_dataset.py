@@ -32,10 +32,13 @@ Reader = Callable[[str, str], tuple[bytes | None, list[Problem]]]
 
 @dataclasses.dataclass(frozen=True)
 class Rig:
-    """The ultrasonic horn: frequency [Hz] and amplitude at 100% command [m]."""
+    """The bench: the ultrasonic horn's frequency [Hz] and amplitude at 100% command [m],
+    and optionally the mains frequency [Hz] its load cell picks up as hum (None: not
+    given; the fit then looks for the hum in the traces, see :mod:`idtool._data._mains`)."""
 
     vibration_frequency_hz: float
     max_amplitude_m: float
+    mains_frequency_hz: float | None = None
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -213,6 +216,11 @@ def _trace(entry: Mapping[str, Any], samples: TraceSamples) -> Trace:
     )
 
 
+def _optional_float(value: object) -> float | None:
+    """``float(value)``, or None for a field left out (the schema checked its type)."""
+    return None if value is None else float(value)  # type: ignore[arg-type]
+
+
 def _located(problems: list[Problem], root: Path | None) -> list[Problem]:
     """File names as the user can open them: under the dataset folder; errors first."""
     if root is not None:
@@ -254,6 +262,7 @@ def _assemble(json_bytes: bytes, read: Reader, root: Path | None, label: str) ->
         rig=Rig(
             vibration_frequency_hz=float(document["rig"]["vibration_frequency_hz"]),
             max_amplitude_m=float(document["rig"]["max_amplitude_m"]),
+            mains_frequency_hz=_optional_float(document["rig"].get("mains_frequency_hz")),
         ),
         traces=tuple(traces),
         sha256=dataset_sha256(json_bytes, blobs),

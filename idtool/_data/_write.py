@@ -62,6 +62,8 @@ def document(
         "vibration_frequency_hz": rig.vibration_frequency_hz,
         "max_amplitude_m": rig.max_amplitude_m,
     }
+    if rig.mains_frequency_hz is not None:
+        out["rig"]["mains_frequency_hz"] = rig.mains_frequency_hz
     out["traces"] = entries
     return out
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -33,12 +34,17 @@ from idtool._data._blocks import FitData
 from idtool._fit._lm import LMResult, levenberg_marquardt
 from idtool._model._benchmodel import BenchModel, bench_model
 from idtool._model._noise import DEFAULT_NOISE
+from idtool._model._params import Param
+
+if TYPE_CHECKING:
+    from idtool._fit._variability import Variability
 
 __all__ = [
     "Z95",
     "Z_AT_BOUND",
     "Estimate",
     "FitResult",
+    "estimate_of",
     "fit_model",
     "quasi_random",
     "run_lm",
@@ -87,6 +93,20 @@ class FitResult:
     warnings: list[str]
     lm_steps: int
     jacobian_evaluations: int  # linearisations: residuals plus one JVP per colour
+    # the levels model's scatter and discrepancy (issue 10), when it is on
+    variability: Variability | None = None
+
+    @property
+    def sd_grids(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """The scatter and discrepancy sds' REML likelihood grids (empty when off)."""
+        return dict(self.variability.grids) if self.variability is not None else {}
+
+    @property
+    def levels(self):
+        """(free levels, sds) of the levels model, or None when it is off."""
+        if self.variability is None:
+            return None
+        return self.variability.free, dict(self.variability.sds)
 
     @property
     def n_data(self) -> int:
@@ -285,6 +305,21 @@ def _values_and_jacobian(
     return vals, jac
 
 
+def estimate_of(spec: Param, z: float, se_z: float) -> Estimate:
+    """A parameter's estimate from its internal value ``z`` and standard error there:
+    the error mapped by the transform's slope (delta method), the 95% interval through
+    the transform itself (so it respects the bounds)."""
+    value = float(spec.value(jnp.asarray(z)))
+    se = abs(float(spec.slope(z))) * float(se_z)
+    if spec.bounded:
+        lo = float(spec.value(jnp.asarray(z - Z95 * se_z)))
+        hi = float(spec.value(jnp.asarray(z + Z95 * se_z)))
+        at_bound = abs(z) > Z_AT_BOUND
+    else:
+        lo, hi, at_bound = value - Z95 * se, value + Z95 * se, False
+    return Estimate(spec.name, spec.unit, value, se, (lo, hi), at_bound)
+
+
 def _summarise(
     model: BenchModel, best: LMResult, phi: float, optima: list[dict], count: dict[str, int]
 ) -> FitResult:
@@ -308,21 +343,15 @@ def _summarise(
     corr = cov / np.outer(se_safe, se_safe)
 
     # delta method for the physical values (and the per-trace friction ratios)
-    vals, dvals = _values_and_jacobian(model, z, *(np.asarray(x) for x in best.aux))
+    vals, dvals = _values_and_jacobian(model, z, *(np.asarray(x) for x in best.aux[:2]))
     se_vals = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", dvals, cov, dvals), 0.0))
 
     warnings: list[str] = []
     estimates: dict[str, Estimate] = {}
     specs = model.params
     for i, spec in enumerate(specs):
-        value, se = float(vals[i]), float(se_vals[i])
-        if spec.bounded:
-            lo = float(spec.value(z[i] - Z95 * se_z[i]))
-            hi = float(spec.value(z[i] + Z95 * se_z[i]))
-            at_bound = abs(z[i]) > Z_AT_BOUND
-        else:
-            lo, hi, at_bound = value - Z95 * se, value + Z95 * se, False
-        estimates[spec.name] = Estimate(spec.name, spec.unit, value, se, (lo, hi), at_bound)
+        estimates[spec.name] = est = estimate_of(spec, z[i], se_z[i])
+        value, (lo, hi), at_bound = est.estimate, est.ci95, est.at_bound
         if spec.physical and at_bound:
             warnings.append(
                 f"{spec.name} = {value:.4g} {spec.unit} sits at the bound of its range "

@@ -18,8 +18,10 @@ import numpy as np
 
 from idtool._data._blocks import FitData, prepare_fit_data
 from idtool._data._dataset import Dataset
+from idtool._data._mains import resolve_mains
 from idtool._fit._fit import FitResult, fit_model
 from idtool._fit._intervals import check_intervals, refit_with_fixed
+from idtool._fit._variability import with_variability
 from idtool._model._coupling import COUPLINGS
 from idtool._model._laws import FRICTION_LAWS
 from idtool._model._noise import DEFAULT_NOISE
@@ -65,14 +67,21 @@ def fit_dataset(
     n_starts: int = 8,
     compare_laws: bool = False,
     profile: bool = False,
-    mains_hz: float = 50.0,
+    mains_hz: float | None = None,
     noise: str = DEFAULT_NOISE,
+    variability: bool = True,
 ) -> FitRun:
     """Fit ``dataset``; ``law``, ``coupling`` and ``noise`` by registered name
     (:data:`FRICTION_LAWS`, :data:`COUPLINGS`, :data:`NOISE_MODELS`); ``coupling="auto"``
     fits every registered coupling law, ``compare_laws`` every friction law with a
-    contact stiffness."""
-    data = prepare_fit_data(dataset, mains_hz=mains_hz, periods_per_block=2)
+    contact stiffness. ``mains_hz`` [Hz]: the block means span whole periods of it; None
+    takes ``rig.mains_frequency_hz``, else the hum found in the traces, else 50 Hz
+    (:func:`idtool._data._mains.resolve_mains`). ``variability`` (default): the chosen
+    fit's intervals carry pull-to-pull scatter and model discrepancy
+    (:mod:`idtool._fit._variability`); False gives the noise-only model."""
+    mains, mains_source, mains_warnings = resolve_mains(dataset, mains_hz)
+    data = prepare_fit_data(dataset, mains_hz=mains, periods_per_block=2, mains_source=mains_source)
+    mains_warnings += data.notes
     laws: tuple[str, ...] = (law,)
     if compare_laws:
         laws = tuple(n for n in FRICTION_LAWS if FRICTION_LAWS.get(n).fit_params)
@@ -90,6 +99,12 @@ def fit_dataset(
     ranked = sorted(candidates.items(), key=lambda kv: kv[1].bic)
     best_key, best = ranked[0]
     best = candidates[best_key] = check_intervals(best)
+    if variability:  # pull-to-pull scatter and model discrepancy (issue 10)
+        best = candidates[best_key] = with_variability(best)
+    if mains_warnings:  # the mains frequency and the blocks, for the fit report
+        best = candidates[best_key] = dataclasses.replace(
+            best, warnings=[*best.warnings, *mains_warnings]
+        )
     if len(ranked) == 1:
         reason = f"{best_key} as requested"
         if coupling == "auto" and single_load:

@@ -17,6 +17,7 @@ from idtool._data._blocks import prepare_fit_data
 from idtool._data._dataset import Dataset, load_dataset
 from idtool._errors import IdtoolError
 from idtool._fit._fit import Estimate, FitResult
+from idtool._fit._variability import FreeLevels
 from idtool._model._benchmodel import BenchModel, bench_model
 
 __all__ = ["STATE_FILE", "StoredFit", "load_stored_fit", "save_fit_state"]
@@ -26,14 +27,27 @@ STATE_FILE = "fit_state.npz"
 
 def save_fit_state(folder: Path, result: FitResult) -> None:
     """Write ``fit_state.npz`` (internal vector, covariance, phi, parameter names)."""
-    np.savez(
-        folder / STATE_FILE,
-        z=result.z,
-        cov_z=result.cov_z,
-        phi=np.array(result.phi),
-        sigma_n=np.array(result.sigma_n),
-        names=np.array(result.model.names),
-    )
+    arrays: dict[str, np.ndarray] = {
+        "z": result.z,
+        "cov_z": result.cov_z,
+        "phi": np.array(result.phi),
+        "sigma_n": np.array(result.sigma_n),
+        "names": np.array(result.model.names),
+    }
+    # the levels model's sd grids (sd values, probabilities), one array per sd
+    arrays |= {f"sd_grid:{k}": np.stack(v) for k, v in result.sd_grids.items()}
+    if result.levels is not None:  # what the sampler's levels likelihood needs
+        free, sds = result.levels
+        arrays |= {f"sd_estimate:{k}": np.array(v) for k, v in sds.items()}
+        arrays |= {
+            "levels_off_n": free.off_n,
+            "levels_on_n": free.on_n,
+            "levels_measured": free.measured,
+            "levels_y": free.y,
+            "levels_cov_y": free.cov_y,
+            "levels_sigma_n": np.array(free.sigma_n),
+        }
+    np.savez(folder / STATE_FILE, **arrays)  # type: ignore[arg-type]  # numpy stubs: allow_pickle
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,6 +62,10 @@ class StoredFit:
     cov_z: np.ndarray
     phi: float
     sigma_n: float
+    # the levels model's sds: name -> (sd values, REML probabilities); empty when off
+    sd_grids: dict[str, tuple[np.ndarray, np.ndarray]] = dataclasses.field(default_factory=dict)
+    # the free levels and the sds (estimate, ci95 lo, hi), or None when off
+    levels: tuple[FreeLevels, dict[str, tuple[float, float, float]]] | None = None
 
     def estimates(self) -> dict[str, Estimate]:
         """Every shared parameter's estimate as ``fit.json`` records it."""
@@ -90,8 +108,13 @@ def load_stored_fit(folder: str | Path) -> StoredFit:
         doc = json.loads(doc_path.read_text())
         state = np.load(state_path)
         ds_info = doc["dataset"]
-        mains_hz = float(doc["noise"]["mains_hz"])
-        periods = round(float(doc["noise"]["block_s"]) * mains_hz)
+        noise = doc["noise"]
+        mains_hz = float(noise["mains_hz"])
+        # The periods asked for rebuild the very blocks (prepare_fit_data chooses the
+        # same count again); a fit.json older than that field had block_s = periods / mains.
+        periods = int(noise.get("periods_requested", round(float(noise["block_s"]) * mains_hz)))
+        periods_used = int(noise.get("periods_per_block", periods))
+        source = str(noise.get("mains_source", "argument"))
     except (ValueError, KeyError, OSError) as err:
         raise IdtoolError(f"{folder}: unreadable fit ({err}); run 'idtool fit' again") from None
     # A dataset saved with the fit (it lived in memory only) is recorded relative to it.
@@ -101,7 +124,14 @@ def load_stored_fit(folder: str | Path) -> StoredFit:
             f"{ds_info['path']}: the dataset changed since the fit (sha256 "
             f"{dataset.sha256[:12]}... instead of {ds_info['sha256'][:12]}...); fit it again"
         )
-    data = prepare_fit_data(dataset, mains_hz=mains_hz, periods_per_block=periods)
+    data = prepare_fit_data(
+        dataset, mains_hz=mains_hz, periods_per_block=periods, mains_source=source
+    )
+    if data.periods_per_block != periods_used:  # an old fit whose blocks were not whole periods
+        raise IdtoolError(
+            f"{doc_path}: the fit averaged over blocks of {periods_used} mains periods, this "
+            f"idtool makes blocks of {data.periods_per_block} whole periods; run 'idtool fit' again"
+        )
     model = bench_model(data, doc["law"], doc["coupling"], doc["noise"].get("name", "ar1"))
     if tuple(state["names"]) != model.names:
         raise IdtoolError(f"{state_path}: parameters do not match the model; fit again")
@@ -114,4 +144,30 @@ def load_stored_fit(folder: str | Path) -> StoredFit:
         cov_z=np.asarray(state["cov_z"]),
         phi=float(state["phi"]),
         sigma_n=float(state["sigma_n"]),
+        sd_grids={
+            key.split(":", 1)[1]: (state[key][0], state[key][1])
+            for key in state.files
+            if key.startswith("sd_grid:")
+        },
+        levels=_stored_levels(state),
     )
+
+
+def _stored_levels(state) -> tuple[FreeLevels, dict[str, tuple[float, float, float]]] | None:
+    """The levels model's state from ``fit_state.npz`` (None for a noise-only fit)."""
+    if "levels_y" not in state.files:
+        return None
+    free = FreeLevels(
+        off_n=state["levels_off_n"],
+        on_n=state["levels_on_n"],
+        measured=state["levels_measured"].astype(bool),
+        y=state["levels_y"],
+        cov_y=state["levels_cov_y"],
+        sigma_n=float(state["levels_sigma_n"]),
+    )
+    sds = {
+        key.split(":", 1)[1]: (float(state[key][0]), float(state[key][1]), float(state[key][2]))
+        for key in state.files
+        if key.startswith("sd_estimate:")
+    }
+    return free, sds

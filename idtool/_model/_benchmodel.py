@@ -218,11 +218,22 @@ class BenchModel(eqx.Module):
         """AR(1)-whitened residuals (:func:`idtool._model._noise.whiten`) of the model."""
         return whiten(self.predict(z) - self.data.force_n, jnp.asarray(self.data.first), phi)
 
+    def level_residuals(
+        self, u: Float[Array, " q"], z: Float[Array, " p"], phi: float | Array
+    ) -> Float[Array, " blocks"]:
+        """Whitened residuals with the per-trace levels given: ``u = (OFF, ON, z[k:])``
+        ([N], [N], then the bench parameters of ``z``; ``z[:k]`` is not used)."""
+        k, m = self.n_physical, self.data.n_traces
+        v = self.values(jnp.concatenate([z[:k], u[2 * m :]]))
+        e = self.block_means(u[:m], u[m : 2 * m], v) - self.data.force_n
+        return whiten(e, jnp.asarray(self.data.first), phi)
+
     def normal_equations(
         self, z: Float[Array, " p"], phi: float | Array
-    ) -> tuple[Array, Array, Array, tuple[Array, Array]]:
+    ) -> tuple[Array, Array, Array, tuple[Array, Array, Array, Array]]:
         """Whitened residuals ``r``, ``J^T J`` and ``J^T r`` at ``z``; and the levels
-        ``(OFF, ON)`` [N] (2 n_traces) with their Jacobian in the physical parameters.
+        ``(OFF, ON)`` [N] (2 n_traces) with their Jacobian in the physical parameters,
+        and the normal equations in ``u`` (below), which the levels model reads.
 
         The physical parameters reach the traces only through the per-trace OFF and ON
         levels, so the Jacobian is taken in the bench model's inputs ``u = (OFF, ON,
@@ -239,9 +250,7 @@ class BenchModel(eqx.Module):
             return jnp.concatenate([off, on])
 
         def resid(u):
-            v = self.values(jnp.concatenate([z[:k], u[2 * m :]]))
-            e = self.block_means(u[:m], u[m : 2 * m], v) - self.data.force_n
-            return whiten(e, jnp.asarray(self.data.first), phi)
+            return self.level_residuals(u, z, phi)
 
         # (2 m, k) and (2 m,): the Jacobian and, from the same pass, the levels
         dlv, lv = jax.jacfwd(lambda zp: (levels(zp),) * 2, has_aux=True)(z[:k])
@@ -251,7 +260,7 @@ class BenchModel(eqx.Module):
         t = jnp.block(
             [[dlv, jnp.zeros((2 * m, n_rest))], [jnp.zeros((n_rest, k)), jnp.eye(n_rest)]]
         )
-        return r, t.T @ jtj_u @ t, t.T @ jtr_u, (lv, dlv)
+        return r, t.T @ jtj_u @ t, t.T @ jtr_u, (lv, dlv, jtj_u, jtr_u)
 
 
 def _shared_params(

@@ -42,6 +42,13 @@ from idtool._posterior._chainfile import (
     read_settings,
 )
 from idtool._posterior._diagnostics import Diagnostics, diagnose
+from idtool._posterior._levels import (
+    SD_PRIOR,
+    LevelsTarget,
+    build_levels_target,
+    levels_params,
+    levels_start,
+)
 from idtool._posterior._likelihood import (
     Target,
     build_target,
@@ -54,7 +61,15 @@ from idtool._posterior._start import find_start, initial_walkers
 __all__ = ["CHAIN_FILE", "LogPosterior", "Posterior", "sample_posterior"]
 
 CHAIN_FILE = "chain.h5"
-_batched = jax.jit(log_posterior_batch)
+LEVELS = "levels"  # the 'noise' of a chain sampled on the levels model
+
+
+@jax.jit
+def _batched(theta, target):
+    """The log-posterior of a batch: the levels model's, or the traces' (Target)."""
+    if isinstance(target, LevelsTarget):
+        return target.log_posterior_batch(theta)
+    return log_posterior_batch(theta, target)
 
 
 class FitLike(Protocol):
@@ -70,6 +85,8 @@ class FitLike(Protocol):
     def phi(self) -> float: ...
     @property
     def sigma_n(self) -> float: ...
+    @property
+    def levels(self) -> Any: ...
 
 
 class LogPosterior:
@@ -79,7 +96,7 @@ class LogPosterior:
     call; the first call's compilation time is kept in ``compile_s``.
     """
 
-    def __init__(self, target: Target, batch: int):
+    def __init__(self, target: Target | LevelsTarget, batch: int):
         self.target = target
         self.batch = batch
         self.compile_s: float | None = None
@@ -207,15 +224,24 @@ def _resolve(fit, noise, priors, stored: dict | None):
                 "start over without --resume to change it"
             )
         noise = stored["noise"]
-    noise = noise or fit.model.noise.name
-    params = sampled_params(dataclasses.replace(fit.model, noise=NOISE_MODELS.get(noise)()))
+    # A fit with scatter and discrepancy is sampled on its levels model unless a noise
+    # model is asked for (the traces' own likelihood, noise only).
+    noise = noise or (LEVELS if fit.levels is not None else fit.model.noise.name)
+    if noise == LEVELS:
+        if fit.levels is None:
+            raise IdtoolError("this fit has no levels model (fitted with --variability off)")
+        params = levels_params(fit.model, fit.levels[0])
+    else:
+        params = sampled_params(dataclasses.replace(fit.model, noise=NOISE_MODELS.get(noise)()))
     overrides: dict[str, Prior] = {}
     if isinstance(priors, str | os.PathLike):
         overrides = read_priors(priors, params)
     elif priors:
         raw = {n: p.to_dict() if isinstance(p, Prior) else p for n, p in priors.items()}
         overrides = parse_priors(raw, params, "priors")
-    table = {p.name: default_prior(p) for p in params} | overrides
+    sd_names = {"scatter_mu", "scatter_fr", "discrepancy_fr"}
+    table = {p.name: SD_PRIOR if p.name in sd_names else default_prior(p) for p in params}
+    table |= overrides
     if stored is not None:
         stored_table = parse_priors(stored["priors"], params, "chain.h5")
         if priors and stored_table != table:
@@ -282,18 +308,30 @@ def sample_posterior(
         raise IdtoolError(f"{steps} steps: give at least 10")
     started = time.perf_counter()
     warnings: tuple[str, ...] = ()
-    if done == 0:
+    if done == 0 and noise == LEVELS:
+        free, sds = fit.levels
+        levels_target = build_levels_target(fit.model, free, table)
+        k = fit.model.n_physical
+        theta, cov = levels_start(fit.z[:k], fit.cov_z[:k, :k], sds, levels_target)
+        z_lin, mode_s = np.asarray(fit.z), 0.0
+        fn = LogPosterior(levels_target, walkers // 2)
+        p0 = initial_walkers(theta, cov, fn, walkers, np.random.default_rng(seed))
+        initial: Any = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
+    elif done == 0:
         rebuild = functools.partial(build_target, fit.model, noise=noise, priors=table)
         start = find_start(fit, rebuild(np.asarray(fit.z)), rebuild)
         mode_s = time.perf_counter() - started
         z_lin, warnings = start.z_lin, start.warnings
         fn = LogPosterior(start.target, walkers // 2)
-        p0 = initial_walkers(start, fn, walkers, np.random.default_rng(seed))
-        initial: Any = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
+        p0 = initial_walkers(start.theta, start.cov, fn, walkers, np.random.default_rng(seed))
+        initial = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
     else:
         assert chain_file is not None
         z_lin = read_linearisation(chain_file)
-        fn = LogPosterior(build_target(fit.model, z_lin, noise, table), walkers // 2)
+        if noise == LEVELS:
+            fn = LogPosterior(build_levels_target(fit.model, fit.levels[0], table), walkers // 2)
+        else:
+            fn = LogPosterior(build_target(fit.model, z_lin, noise, table), walkers // 2)
         initial = last_state(chain_file)
         mode_s = 0.0
     settings = _settings(fit, params, table, noise, walkers, seed) | {"warnings": list(warnings)}

@@ -175,18 +175,22 @@ def find_start(fit: Any, target: Target, rebuild: Callable[[np.ndarray], Target]
 
 
 def initial_walkers(
-    start: Start, fn: Callable[[np.ndarray], np.ndarray], walkers: int, rng: np.random.Generator
+    theta: np.ndarray,
+    cov: np.ndarray,
+    fn: Callable[[np.ndarray], np.ndarray],
+    walkers: int,
+    rng: np.random.Generator,
 ) -> np.ndarray:
-    """``walkers`` positions around the mode, every one with a finite log-posterior."""
-    ndim = start.theta.size
-    cov = start.cov
+    """``walkers`` positions around ``theta`` (normal, covariance ``cov``), every one
+    with a finite log-posterior."""
+    ndim = theta.size
     chol = np.linalg.cholesky(cov + 1e-14 * np.diag(np.maximum(np.diag(cov), 1e-30)))
-    p0 = start.theta + rng.standard_normal((walkers, ndim)) @ chol.T
+    p0 = theta + rng.standard_normal((walkers, ndim)) @ chol.T
     for _ in range(50):
         bad = ~np.isfinite(fn(p0))
         if not bad.any():
             return p0
-        p0[bad] = start.theta + rng.standard_normal((int(bad.sum()), ndim)) @ chol.T
+        p0[bad] = theta + rng.standard_normal((int(bad.sum()), ndim)) @ chol.T
     raise IdtoolError(
         "could not place every walker where the log-posterior is finite; "
         "are the priors much narrower than the fit's intervals?"

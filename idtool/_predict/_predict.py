@@ -31,6 +31,8 @@ from idtool._model._benchmodel import BenchModel
 from idtool._posterior._sample import Posterior
 from idtool._posterior._store import POSTERIOR_FILE, PosteriorDraws, load_posterior
 
+SD_NAMES = ("discrepancy_fr", "scatter_fr")  # the sds a prediction uses
+
 __all__ = [
     "AmplitudeFor",
     "Draws",
@@ -49,12 +51,20 @@ _BISECTIONS = 40  # amplitude resolution 2^-40
 
 @dataclasses.dataclass(frozen=True)
 class Draws:
-    """Draws of the physical parameters (flat arrays) and where they come from."""
+    """Draws of the physical parameters (flat arrays) and where they come from.
+
+    ``sds`` holds, per draw, the levels model's sds (``discrepancy_fr``, ``scatter_fr``;
+    :mod:`idtool._fit._variability`) when the fit has them: the friction-ratio band then
+    carries the operating-point discrepancy and the new-trace band the pull-to-pull
+    scatter too. ``seed`` seeds those extra draws.
+    """
 
     model: BenchModel
     values: dict[str, np.ndarray]
     source: str  # "posterior" or "fit covariance"
     note: str
+    sds: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    seed: int = 0
 
     @property
     def n(self) -> int:
@@ -65,35 +75,75 @@ def _thin(n: int, max_draws: int) -> np.ndarray:
     return np.unique(np.linspace(0, n - 1, min(n, max_draws)).round().astype(int))
 
 
-def draws_from_posterior(post: Posterior, model: BenchModel, max_draws: int = 2000) -> Draws:
+SdGrids = dict[str, tuple[np.ndarray, np.ndarray]]
+
+
+def _sds(
+    sampled: dict[str, np.ndarray], grids: SdGrids | None, n: int, seed: int
+) -> tuple[dict[str, np.ndarray], str]:
+    """Per-draw sds: the sampled ones, else draws from the fit's REML grids (seeded);
+    and a note on where they came from."""
+    if all(name in sampled for name in SD_NAMES):
+        return {name: sampled[name] for name in SD_NAMES}, ""
+    if not grids:
+        return {}, "; no scatter or discrepancy in the model: the bands are the noise's only"
+    rng = np.random.default_rng([seed, 1])
+    out = {name: rng.choice(grid, size=n, p=prob) for name, (grid, prob) in grids.items()}
+    return out, "; scatter and discrepancy sds drawn from the fit's REML likelihood"
+
+
+def draws_from_posterior(
+    post: Posterior,
+    model: BenchModel,
+    max_draws: int = 2000,
+    sd_grids: SdGrids | None = None,
+    seed: int = 0,
+) -> Draws:
     """Prediction draws from an in-memory :class:`~idtool._posterior._sample.Posterior`
-    (kept draws, thinned evenly to ``max_draws``)."""
+    (kept draws, thinned evenly to ``max_draws``); the sds from the posterior, else
+    from the fit's ``sd_grids``."""
     all_draws = post.draws()
     n = next(iter(all_draws.values())).size
     idx = _thin(n, max_draws)
     values = {k: all_draws[k][idx] for k in model.physical_names}
-    note = f"posterior ({post.noise} noise, {idx.size} of {n} draws)"
+    sampled = {k: all_draws[k][idx] for k in SD_NAMES if k in all_draws}
+    sds, how = _sds(sampled, sd_grids, idx.size, seed)
+    note = f"posterior ({post.noise} noise, {idx.size} of {n} draws){how}"
     if not post.diagnostics.converged:
         note += "; the chain is NOT converged"
-    return Draws(model, values, "posterior", note)
+    return Draws(model, values, "posterior", note, sds, seed)
 
 
-def draws_from_stored(post: PosteriorDraws, model: BenchModel, max_draws: int = 2000) -> Draws:
+def draws_from_stored(
+    post: PosteriorDraws,
+    model: BenchModel,
+    max_draws: int = 2000,
+    sd_grids: SdGrids | None = None,
+    seed: int = 0,
+) -> Draws:
     """Prediction draws from ``posterior.nc`` read back (:func:`load_posterior`)."""
     n = post.n_draws
     idx = _thin(n, max_draws)
     values = {k: post.values[k][idx] for k in model.physical_names}
-    note = f"posterior ({post.meta['noise']} noise, {idx.size} of {n} draws)"
+    sampled = {k: post.values[k][idx] for k in SD_NAMES if k in post.values}
+    sds, how = _sds(sampled, sd_grids, idx.size, seed)
+    note = f"posterior ({post.meta['noise']} noise, {idx.size} of {n} draws){how}"
     if not post.meta["diagnostics"]["converged"]:
         note += "; the chain is NOT converged, see sample.json"
-    return Draws(model, values, "posterior", note)
+    return Draws(model, values, "posterior", note, sds, seed)
 
 
 def draws_from_covariance(
-    model: BenchModel, z: np.ndarray, cov_z: np.ndarray, max_draws: int = 2000, seed: int = 0
+    model: BenchModel,
+    z: np.ndarray,
+    cov_z: np.ndarray,
+    max_draws: int = 2000,
+    seed: int = 0,
+    sd_grids: SdGrids | None = None,
 ) -> Draws:
     """Gaussian draws on the internal scale from a fit's covariance: a local
-    approximation of the posterior, mapped through the transforms."""
+    approximation of the posterior, mapped through the transforms; the sds from the
+    fit's REML grids ``sd_grids``."""
     k = model.n_physical
     rng = np.random.default_rng(seed)
     draws = rng.multivariate_normal(z[:k], cov_z[:k, :k], size=max_draws, method="eigh")
@@ -101,11 +151,12 @@ def draws_from_covariance(
         p.name: np.asarray(p.value(jnp.asarray(draws[:, i])))
         for i, p in enumerate(model.shared_params[:k])
     }
+    sds, how = _sds({}, sd_grids, max_draws, seed)
     note = (
         "no posterior: Gaussian draws on the internal scale from the fit's covariance "
-        "(a local approximation; run 'idtool sample' or Fit.sample() for the posterior)"
+        "(a local approximation; run 'idtool sample' or Fit.sample() for the posterior)" + how
     )
-    return Draws(model, values, "fit covariance", note)
+    return Draws(model, values, "fit covariance", note, sds, seed)
 
 
 def prediction_draws(fit: StoredFit, max_draws: int = 2000, seed: int = 0) -> Draws:
@@ -113,8 +164,8 @@ def prediction_draws(fit: StoredFit, max_draws: int = 2000, seed: int = 0) -> Dr
     from its covariance when it has none."""
     path = Path(fit.folder) / POSTERIOR_FILE
     if path.is_file():
-        return draws_from_stored(load_posterior(path), fit.model, max_draws)
-    return draws_from_covariance(fit.model, fit.z, fit.cov_z, max_draws, seed)
+        return draws_from_stored(load_posterior(path), fit.model, max_draws, fit.sd_grids, seed)
+    return draws_from_covariance(fit.model, fit.z, fit.cov_z, max_draws, seed, fit.sd_grids)
 
 
 def extrapolation_notes(data: FitData, loads_n=(), amplitudes=(), speeds_m_s=()) -> list[str]:
@@ -143,13 +194,19 @@ def _fr_draws(model: BenchModel, v, load, alpha, speed):
 
 @dataclasses.dataclass(frozen=True)
 class Prediction:
-    """FR at one operating point: median and 95% band over draws."""
+    """FR at one operating point: median and 95% band over draws.
+
+    ``median``/``ci95``: the mean friction ratio at this operating point (the curve,
+    its operating-point discrepancy included): what many pulls here average to.
+    ``new_trace``: (median, (lo, hi)) of the next single pull, its scatter added.
+    """
 
     normal_load_n: float
     amplitude_fraction: float
     pull_speed_m_s: float
     median: float
     ci95: tuple[float, float]
+    new_trace: tuple[float, tuple[float, float]] | None = None
 
     @property
     def reduction_percent(self) -> tuple[float, tuple[float, float]]:
@@ -159,11 +216,13 @@ class Prediction:
 
     def to_dict(self) -> dict:
         red, (rlo, rhi) = self.reduction_percent
+        nmed, (nlo, nhi) = self.new_trace or (self.median, self.ci95)
         return {
             "normal_load_n": self.normal_load_n,
             "amplitude_fraction": self.amplitude_fraction,
             "pull_speed_m_s": self.pull_speed_m_s,
             "friction_ratio": {"median": self.median, "ci95": list(self.ci95)},
+            "new_trace": {"median": nmed, "ci95": [nlo, nhi]},
             "reduction_percent": {"median": red, "ci95": [rlo, rhi]},
         }
 
@@ -188,11 +247,36 @@ def predict_friction_ratio(draws: Draws, loads_n, amplitudes, speeds_m_s) -> lis
             jnp.asarray(grid[:, 2]),
         )
     )
-    med, lo, hi = _band(fr)
+    mean, new = with_variability(fr, draws)
+    med, lo, hi = _band(mean)
+    nmed, nlo, nhi = _band(new)
     return [
-        Prediction(float(g[0]), float(g[1]), float(g[2]), float(m), (float(a), float(b)))
-        for g, m, a, b in zip(grid, med, lo, hi, strict=True)
+        Prediction(
+            float(g[0]),
+            float(g[1]),
+            float(g[2]),
+            float(m),
+            (float(a), float(b)),
+            (float(nm), (float(na), float(nb))),
+        )
+        for g, m, a, b, nm, na, nb in zip(grid, med, lo, hi, nmed, nlo, nhi, strict=True)
     ]
+
+
+def with_variability(fr: np.ndarray, draws: Draws) -> tuple[np.ndarray, np.ndarray]:
+    """FR draws (draws, points) of the physical curve -> the mean FR at each point (the
+    curve times exp(d), d ~ N(0, discrepancy_fr^2) per draw and point) and a new pull's
+    FR (times exp(d + c), c ~ N(0, scatter_fr^2)); both capped at 1 (ultrasound does
+    not raise friction; the simulator and the bench agree). Without sds, both are the
+    curve."""
+    if not draws.sds:
+        return fr, fr
+    rng = np.random.default_rng([draws.seed, 2])
+    zero = np.zeros(fr.shape[0])
+    disc = draws.sds.get("discrepancy_fr", zero)[:, None] * rng.standard_normal(fr.shape)
+    scatter = draws.sds.get("scatter_fr", zero)[:, None]
+    new = disc + scatter * rng.standard_normal(fr.shape)
+    return np.minimum(fr * np.exp(disc), 1.0), np.minimum(fr * np.exp(new), 1.0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -257,7 +341,7 @@ def _amplitude_draws(model: BenchModel, v, load, speed, target_fr):
     ``load`` and ``speed`` (inf if full amplitude does not reach it), and FR at full
     amplitude."""
 
-    def solve(v):
+    def solve(v, target_fr):
         def fr_at(alpha):
             return model.friction_ratios(v, load[None], alpha[None], speed[None])[0]
 
@@ -272,7 +356,7 @@ def _amplitude_draws(model: BenchModel, v, load, speed, target_fr):
         alpha = jnp.where(fr_full <= target_fr, 0.5 * (lo + hi), jnp.inf)
         return alpha, fr_full
 
-    return jax.vmap(solve)(v)
+    return jax.vmap(solve)(v, target_fr)
 
 
 def amplitude_for_reduction(
@@ -281,6 +365,13 @@ def amplitude_for_reduction(
     """The amplitude for ``target_reduction_percent`` at every load x speed."""
     target_fr = 1.0 - target_reduction_percent / 100.0
     v = {k: jnp.asarray(x) for k, x in draws.values.items()}
+    # The mean curve carries the operating-point discrepancy exp(d): FR exp(d) reaches
+    # the target where the physical curve reaches target exp(-d), per draw.
+    shift = np.ones(draws.n)
+    if draws.sds:
+        rng = np.random.default_rng([draws.seed, 3])
+        sd = draws.sds.get("discrepancy_fr", np.zeros(draws.n))
+        shift = np.exp(-sd * rng.standard_normal(draws.n))
     out = []
     for load in loads_n:
         for speed in speeds_m_s:
@@ -289,12 +380,13 @@ def amplitude_for_reduction(
                 v,
                 jnp.asarray(float(load)),
                 jnp.asarray(float(speed)),
-                jnp.asarray(target_fr),
+                jnp.asarray(target_fr * shift),
             )
             alpha, fr_full = np.asarray(alpha), np.asarray(fr_full)
             # quantiles that are actual draws: no interpolation towards +inf
             lo, med, hi = np.percentile(alpha, [2.5, 50.0, 97.5], method="inverted_cdf")
             med, lo, hi = float(med), float(lo), float(hi)
+            fr_full = np.minimum(fr_full / shift, 1.0)  # the mean curve at full amplitude
             rmed, rlo, rhi = (float(x) for x in _band(100.0 * (1.0 - fr_full)))
             out.append(
                 AmplitudeFor(

@@ -60,6 +60,16 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
                 **{key: _est(r.estimates[f"{key}[{tid}]"]) for key, _, _ in TRACE_GROUPS},
             }
         )
+    var = r.variability
+    if var is not None:
+        free_fr, free_se = var.free.friction_ratio, var.free.friction_ratio_se
+        for i, tr in enumerate(traces):
+            measured = bool(var.free.measured[i])
+            tr["free_friction_ratio"] = {
+                "estimate": float(free_fr[i]) if measured else None,
+                "std_error": float(free_se[i]) if measured else None,
+                "measured": measured,
+            }
     prov = provenance(argv)
     law, coupling = r.model.law.name, r.model.coupling.name
     return {
@@ -78,9 +88,14 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
             "model": f"{r.model.noise.description} on block means over whole mains periods",
             "block_s": d.block_s,
             "mains_hz": d.mains_hz,
+            "mains_source": d.mains_source,
+            "periods_per_block": d.periods_per_block,
+            "periods_requested": d.periods_requested,
+            "residual_hum_fraction": d.residual_hum_fraction,
             "phi": r.phi,
             "sigma_n": r.sigma_n,
         },
+        "variability": _variability_json(r),
         "correlation": {"names": shared, "matrix": r.correlation[np.ix_(idx, idx)].tolist()},
         "model_comparison": [
             {"model": key, "aic": c.aic, "bic": c.bic, "loglik": c.loglik, "n_params": c.n_params}
@@ -111,6 +126,44 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
     }
 
 
+def _variability_json(r: FitResult) -> dict:
+    """The levels model's sds, lack-of-fit test and notes (``_fit/_variability.py``)."""
+    var = r.variability
+    if var is None:
+        return {"on": False}
+    return {
+        "on": True,
+        "model": "log levels: trace scatter of mu and FR, operating-point discrepancy of FR",
+        "sds": {
+            name: {"estimate": est, "ci95": [lo, hi], "unit": "1 (relative)"}
+            for name, (est, lo, hi) in var.sds.items()
+        },
+        "separable": var.separable,
+        "lack_of_fit": {"chi2": var.chi2, "dof": var.dof, "p_value": var.p_value},
+        "loglik": var.loglik,
+        "loglik_without": var.loglik_without,
+    }
+
+
+def _variability_lines(r: FitResult) -> list[str]:
+    var = r.variability
+    if var is None:
+        return ["[[Scatter and discrepancy]]  off (--variability off): noise-only intervals"]
+    lines = [
+        "[[Scatter and discrepancy]]  (sds on the log scale, i.e. relative; REML, "
+        "95% from each sd's likelihood)"
+    ]
+    fr_typ = float(np.nanmedian(var.free.friction_ratio)) if var.free.measured.any() else 1.0
+    for name, (est, lo, hi) in var.sds.items():
+        extra = f"  ~ {fr_typ * est:.4f} in FR" if name.endswith("_fr") else ""
+        lines.append(f"    {name:22s}{100 * est:7.2f}%  [{100 * lo:.2f}%, {100 * hi:.2f}%]{extra}")
+    lines.append(
+        f"    lack of fit            chi2 = {var.chi2:.1f} on {var.dof} dof, p = {var.p_value:.3g} "
+        "(free per-trace levels against the physical model, noise only)"
+    )
+    return lines
+
+
 def _fmt(e: Estimate) -> str:
     rel = f"({100 * e.std_error / abs(e.estimate):.2g}%)" if e.estimate else ""
     flag = "  AT BOUND" if e.at_bound else ""
@@ -133,13 +186,15 @@ def fit_report(run: FitRun) -> str:
         f"innovation sigma = {r.sigma_n:.3g} N",
         f"    statistics   log L = {r.loglik:.1f}, AIC = {r.aic:.1f}, BIC = {r.bic:.1f}, "
         f"{r.n_params} parameters, {r.lm_steps} Levenberg-Marquardt steps",
-        "[[Physical parameters]]  (95% intervals from the Gauss-Newton covariance)",
+        "[[Physical parameters]]  (95% intervals from the Gauss-Newton covariance"
+        + (", scatter and discrepancy included)" if r.variability is not None else ")"),
     ]
     for name in r.model.physical_names:
         lines.append(f"    {name:22s}{_fmt(r.estimates[name])}")
         if name in run.profiles:
             lo, hi = run.profiles[name].ci95
             lines.append(f"    {'':22s}profile likelihood 95%: [{lo:.5g}, {hi:.5g}]")
+    lines += _variability_lines(r)
     lines.append("[[Bench parameters]]")
     shared = _shared_names(r)
     for name in shared:

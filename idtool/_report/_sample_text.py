@@ -6,15 +6,17 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from idtool._atomic import write_text_atomic
 from idtool._fit._fit import Estimate
 from idtool._model._noise import DEFAULT_NOISE
+from idtool._posterior._levels import LevelsCheck, build_levels_target, levels_predictive
 from idtool._posterior._likelihood import build_target, conditioning_shrinkage
 from idtool._posterior._ppc import PredictiveCheck, plot_predictive, posterior_predictive
-from idtool._posterior._sample import FitLike, Posterior
+from idtool._posterior._sample import LEVELS, FitLike, Posterior
 from idtool._posterior._store import write_posterior
 from idtool._provenance import provenance
 from idtool._version import __version__
@@ -31,7 +33,7 @@ def _fmt(x: float) -> str:
 def sample_report(
     post: Posterior,
     estimates: Mapping[str, Estimate],
-    check: PredictiveCheck,
+    check: PredictiveCheck | LevelsCheck,
     source: str,
     shrink: np.ndarray,
 ) -> str:
@@ -44,9 +46,14 @@ def sample_report(
     lines = [
         "[[Posterior]]",
         f"    fit          {source} ({model.law.name} friction, {model.coupling.name} coupling)",
-        f"    noise        {post.noise}"
-        + (" (default)" if post.noise == DEFAULT_NOISE else "")
-        + "; the per-trace nuisances are integrated out, not fixed",
+        (
+            "    model        levels model: the traces' own levels, scatter and "
+            "discrepancy sampled (nuisances and noise integrated in the fit)"
+            if post.noise == LEVELS
+            else f"    noise        {post.noise}"
+            + (" (default)" if post.noise == DEFAULT_NOISE else "")
+            + "; the per-trace nuisances are integrated out, not fixed"
+        ),
         f"    sampler      emcee, {post.chain.shape[1]} walkers x {post.chain.shape[0]} steps, "
         f"seed {post.seed}; compile {t['compile_s']:.1f} s, sampling {t['sampling_s']:.1f} s "
         f"for {t['steps_this_run']:.0f} steps",
@@ -62,6 +69,19 @@ def sample_report(
             f"[{_fmt(s['ci95'][0])}, {_fmt(s['ci95'][1])}]{fit_ci}"
         )
     lines += ["[[Diagnostics]]", post.diagnostics.report()]
+    if isinstance(check, LevelsCheck):
+        lines += [
+            "[[Posterior predictive check]]  (levels model)",
+            f"    {100 * check.inside_fraction:.1f}% of the traces' own levels (log OFF, log FR) "
+            "lie inside their 95% predictive band",
+            f"    chi-square discrepancy: posterior predictive p = {check.p_value:.2f} "
+            "(near 0: the model misses the levels even with its scatter and discrepancy)",
+            "[[Priors]]",
+        ]
+        lines += [f"    {n:20s}{p.describe()}" for n, p in post.priors.items()]
+        lines += ["[[Warnings]]"]
+        lines += [f"    - {w}" for w in post.warnings] or ["    none"]
+        return "\n".join(lines)
     lines += [
         "[[Posterior predictive check]]",
         f"    {100 * check.inside_fraction:.1f}% of the measured block means lie inside the "
@@ -95,9 +115,24 @@ def write_posterior_outputs(
     ``post`` into ``folder`` (each file atomically); returns the text report."""
     folder = Path(folder)
     model = fit.model
-    target = build_target(model, post.z_lin, post.noise, post.priors)
-    check = posterior_predictive(post, fit, seed=post.seed, target=target)
     shrink = conditioning_shrinkage(fit.cov_z, model.n_shared)
+    check: PredictiveCheck | LevelsCheck
+    if post.noise == LEVELS:
+        levels = build_levels_target(model, fit.levels[0], post.priors)
+        check = levels_predictive(post.chain, post.diagnostics.burn, levels, seed=post.seed)
+        nuisances: dict[str, Any] = {
+            "treatment": "levels model: the traces' own levels with their covariance "
+            "(nuisances, slopes and noise integrated in the fit's stage 1)"
+        }
+    else:
+        target = build_target(model, post.z_lin, post.noise, post.priors)
+        check = posterior_predictive(post, fit, seed=post.seed, target=target)
+        nuisances = {
+            "treatment": "integrated out (linearised at the fit, Gaussian)",
+            "sd_ratio_if_fixed": dict(
+                zip(model.names[: model.n_shared], map(float, shrink), strict=True)
+            ),
+        }
     report = sample_report(post, estimates, check, str(folder), shrink)
     prov = provenance(command)
     doc = {
@@ -106,12 +141,7 @@ def write_posterior_outputs(
         "priors": {n: p.to_dict() for n, p in post.priors.items()},
         "diagnostics": post.diagnostics.to_dict(),
         "posterior_predictive": check.to_dict(),
-        "nuisances": {
-            "treatment": "integrated out (linearised at the fit, Gaussian)",
-            "sd_ratio_if_fixed": dict(
-                zip(model.names[: model.n_shared], map(float, shrink), strict=True)
-            ),
-        },
+        "nuisances": nuisances,
         "warnings": list(post.warnings),
         "timing_s": post.timing,
         "seed": post.seed,
@@ -123,5 +153,50 @@ def write_posterior_outputs(
     write_posterior(post, folder / "posterior.nc", extra={"fit_folder": str(folder)})
     write_text_atomic(folder / "sample.json", json.dumps(doc, indent=1) + "\n")
     write_text_atomic(folder / "report_sample.txt", report + "\n")
-    plot_predictive(check, model.data.trace_ids, folder / "ppc.png")
+    if isinstance(check, LevelsCheck):
+        plot_levels_check(check, fit.levels[0], model, folder / "ppc.png")
+    else:
+        plot_predictive(check, model.data.trace_ids, folder / "ppc.png")
     return report
+
+
+def plot_levels_check(check: LevelsCheck, free, model, path: Path) -> Path:
+    """``ppc.png`` of a levels-model posterior: each trace's own friction ratio and OFF
+    level (relative to the median) with their error bars, over the 95% predictive band."""
+    from idtool._plotting import subplots
+
+    m = model.data.n_traces
+    y, (lo, hi) = check.y, check.band
+    fig, (a1, a2) = subplots(1, 2, figsize=(13, 4.2))
+    x_off = np.arange(m)
+    sd_off = np.sqrt(np.diag(free.cov_y)[:m])
+    ref = np.median(y[:m])
+    a1.fill_between(
+        x_off, 100 * (lo[:m] - ref), 100 * (hi[:m] - ref), alpha=0.3, label="95% predictive"
+    )
+    a1.errorbar(x_off, 100 * (y[:m] - ref), 196 * sd_off, fmt="o", ms=3, label="trace (own level)")
+    a1.set(xlabel="trace", ylabel="log OFF level - median [%]", title="OFF levels")
+    idx = np.flatnonzero(free.measured)
+    fr = np.exp(y[m:])
+    a2.fill_between(
+        np.arange(idx.size), np.exp(lo[m:]), np.exp(hi[m:]), alpha=0.3, label="95% predictive"
+    )
+    a2.errorbar(
+        np.arange(idx.size),
+        fr,
+        1.96 * fr * np.sqrt(np.diag(free.cov_y)[m:]),
+        fmt="o",
+        ms=3,
+        label="trace (own FR)",
+    )
+    a2.set_xticks(
+        np.arange(idx.size), [model.data.trace_ids[i] for i in idx], rotation=90, fontsize=6
+    )
+    a2.set(
+        ylabel="friction ratio", title=f"FR per trace ({100 * check.inside_fraction:.0f}% inside)"
+    )
+    for a in (a1, a2):
+        a.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    return Path(path)

@@ -2,6 +2,12 @@
 
 The dataclasses mirror the JSON file one to one, so ``BenchParams.from_dict(p.to_dict())``
 is ``p`` and the schema's descriptions (with units) document every field.
+
+The optional fields describe departures of the bench from the fit's model (pull-to-pull
+scatter, a lagging actuator, offset drift, a coupling law the fit does not ship). Their
+defaults are "no departure" and reproduce the simulator's earlier output bit for bit;
+:meth:`BenchParams.to_dict` leaves out optional fields at their defaults, so a file
+without them reads and writes back unchanged.
 """
 
 from __future__ import annotations
@@ -16,6 +22,7 @@ from idtool._data._schema import SIMULATOR_PARAMS_SCHEMA, schema_problems
 from idtool._errors import IdtoolError
 from idtool._jsonio import parse_json
 from idtool._model._coupling import COUPLINGS, AbstractCoupling
+from idtool._simulate._truth_coupling import TRUTH_ONLY_COUPLINGS
 
 __all__ = [
     "ActuatorParams",
@@ -25,6 +32,7 @@ __all__ = [
     "ExperimentParams",
     "LoadCellParams",
     "OutputParams",
+    "ScatterParams",
     "SwitchingParams",
     "load_bench_params",
 ]
@@ -43,27 +51,57 @@ class ContactParams:
 
 @dataclasses.dataclass(frozen=True)
 class CouplingParams:
-    """Horn amplitude -> slip amplitude: ``law`` 'constant' or 'power_limited' (P [N])."""
+    """Horn amplitude -> slip amplitude.
+
+    ``law`` is 'constant', 'power_limited' (load scale ``power_load_n`` P [N]) or the
+    truth-only 'load_exponential' (load scale ``load_scale_n`` [N]; see
+    :mod:`idtool._simulate._truth_coupling`).
+    """
 
     law: str
     gain: float
     power_load_n: float | None = None
+    load_scale_n: float | None = None
+
+    @property
+    def in_fit(self) -> bool:
+        """Whether the fit ships this law (else the simulation is deliberately misspecified)."""
+        return self.law not in TRUTH_ONLY_COUPLINGS
 
     def model(self) -> AbstractCoupling:
-        """The registered coupling law of this name (``power_limited`` in the file is
-        the registry's ``power-limited``)."""
-        values: dict[str, Any] = {"coupling_gain": self.gain, "power_load_n": self.power_load_n}
+        """The coupling law of this name: the registry's (``power_limited`` in the file is
+        the registry's ``power-limited``), or a truth-only law of the simulator."""
+        values: dict[str, Any] = {
+            "coupling_gain": self.gain,
+            "power_load_n": self.power_load_n,
+            "load_scale_n": self.load_scale_n,
+        }
+        if self.law in TRUTH_ONLY_COUPLINGS:
+            return TRUTH_ONLY_COUPLINGS[self.law].from_values(values)
         return COUPLINGS.get(self.law.replace("_", "-")).from_values(values)
+
+
+ACTUATOR_MODELS = ("slope", "lag")
 
 
 @dataclasses.dataclass(frozen=True)
 class ActuatorParams:
-    """Pull start [s], start-up and ON/OFF slopes [N/s], corner rounding [N]."""
+    """The pneumatic actuator: when the pull starts [s] and how the force follows its target.
+
+    ``model`` 'slope' (the fit's model): constant start-up and ON/OFF slopes [N/s] with
+    corners rounded over ``corner_n`` [N]. ``model`` 'lag': a first-order lag of time
+    constant ``time_constant_s`` [s] whose rate is limited to ``rate_limit_n_s`` [N/s],
+    for the start-up as well as the ON/OFF switchings. Each model's fields are None
+    under the other.
+    """
 
     pull_start_s: float
-    startup_slope_n_s: float
-    slope_n_s: float
-    corner_n: float
+    startup_slope_n_s: float | None = None
+    slope_n_s: float | None = None
+    corner_n: float | None = None
+    model: str = "slope"
+    time_constant_s: float | None = None
+    rate_limit_n_s: float | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -86,6 +124,20 @@ class LoadCellParams:
     mains_frequency_hz: float
     mains_amplitude_n: float
     adc_lsb_n: float
+    offset_drift_sd_n_s: float = 0.0
+
+
+@dataclasses.dataclass(frozen=True)
+class ScatterParams:
+    """Pull-to-pull scatter of the contact: log-normal multipliers' sd [-] per trace.
+
+    A trace's friction ratio is the operating point's FR times ``exp(N(0,
+    friction_ratio_sd))``, capped at 1; its mu is mu times ``exp(N(0,
+    friction_coefficient_sd))``, which scatters its OFF level ``mu N``.
+    """
+
+    friction_ratio_sd: float = 0.0
+    friction_coefficient_sd: float = 0.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -124,6 +176,7 @@ class BenchParams:
     experiments: ExperimentParams
     output: OutputParams
     description: str | None = None
+    scatter: ScatterParams = ScatterParams()
 
     @classmethod
     def from_dict(cls, document: Mapping[str, Any], file: str = "params") -> BenchParams:
@@ -139,10 +192,9 @@ class BenchParams:
         return cls(
             name=d["name"],
             material=d["material"],
-            rig=Rig(
-                vibration_frequency_hz=float(d["rig"]["vibration_frequency_hz"]),
-                max_amplitude_m=float(d["rig"]["max_amplitude_m"]),
-            ),
+            # Every rig field the dataset schema knows (its optional ones included), so a
+            # field the file gives reaches dataset.json and to_dict; 'x_' ones are ignored.
+            rig=Rig(**_floats({k: v for k, v in d["rig"].items() if not k.startswith("x_")})),
             contact=ContactParams(
                 friction_law=d["contact"]["friction_law"],
                 friction_coefficient=float(d["contact"]["friction_coefficient"]),
@@ -152,27 +204,43 @@ class BenchParams:
                 law=d["coupling"]["law"],
                 gain=float(d["coupling"]["gain"]),
                 power_load_n=_optional_float(d["coupling"].get("power_load_n")),
+                load_scale_n=_optional_float(d["coupling"].get("load_scale_n")),
             ),
-            actuator=ActuatorParams(**_floats(d["actuator"])),
+            actuator=_actuator(d["actuator"]),
             horn_switching=SwitchingParams(**_floats(d["horn_switching"])),
             load_cell=LoadCellParams(**_floats(d["load_cell"])),
             experiments=_experiments(d["experiments"]),
             output=OutputParams(**d["output"]),
             description=d.get("description"),
+            scatter=ScatterParams(**_floats(d.get("scatter", {}))),
         )
 
     def to_dict(self) -> dict[str, Any]:
-        """The JSON document of these parameters (lists for tuples)."""
+        """The JSON document of these parameters (lists for tuples).
+
+        Unset fields (None) and optional fields at their defaults are left out, so the
+        document of parameters without departures is the same as before they existed.
+        """
         out: dict[str, Any] = {"params_version": PARAMS_VERSION}
         for field in dataclasses.fields(self):
             value = getattr(self, field.name)
-            if value is None:
+            if value is None or _is_default(field, value):
                 continue
             if dataclasses.is_dataclass(value) and not isinstance(value, type):
-                value = {k: v for k, v in dataclasses.asdict(value).items() if v is not None}
-                value = {k: list(v) if isinstance(v, tuple) else v for k, v in value.items()}
+                value = {
+                    f.name: list(v) if isinstance(v, tuple) else v
+                    for f in dataclasses.fields(value)
+                    if (v := getattr(value, f.name)) is not None and not _is_default(f, v)
+                }
             out[field.name] = value
         return out
+
+
+def _is_default(field: dataclasses.Field[Any], value: Any) -> bool:
+    """Whether ``value`` is the declared (non-None) default of an optional field."""
+    if field.default is not dataclasses.MISSING and field.default is not None:
+        return bool(value == field.default)
+    return False
 
 
 def _optional_float(value: Any) -> float | None:
@@ -181,6 +249,11 @@ def _optional_float(value: Any) -> float | None:
 
 def _floats(section: Mapping[str, Any]) -> dict[str, float]:
     return {k: float(v) for k, v in section.items()}
+
+
+def _actuator(section: Mapping[str, Any]) -> ActuatorParams:
+    values: dict[str, Any] = {k: float(v) for k, v in section.items() if k != "model"}
+    return ActuatorParams(model=section.get("model", "slope"), **values)
 
 
 def _experiments(section: Mapping[str, Any]) -> ExperimentParams:

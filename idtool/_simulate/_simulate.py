@@ -1,12 +1,26 @@
 """Bench simulator: the pure-JAX bench model plus a load cell's imperfections -> dataset v1.
 
-The noise-free force is exactly what the fit will use (:mod:`idtool._model._bench` with the
-couplings of :mod:`idtool._model._coupling`): the OFF level ``mu N``, the ON level
+By default the noise-free force is exactly what the fit will use (:mod:`idtool._model._bench`
+with the couplings of :mod:`idtool._model._coupling`): the OFF level ``mu N``, the ON level
 ``FR mu N`` with FR from :func:`on_friction_ratio`, the actuator-limited slopes and the
 start-up ramp of :func:`mean_force_n`. On top, in NumPy (:mod:`idtool._simulate._noise`): a
 random lag of the horn behind the logged ON flag, a load-cell offset, white and AR(1)
-noise, mains hum and ADC quantisation. Trace ``k`` draws from the ``k``-th child of
-``np.random.default_rng(seed)``, so one seed gives the same bytes every time.
+noise, mains hum (at any frequency) and ADC quantisation. Trace ``k`` draws from the
+``k``-th child of ``np.random.default_rng(seed)``, so one seed gives the same bytes every
+time.
+
+Optional departures from the fit's model (:mod:`idtool._simulate._params`): pull-to-pull
+scatter of FR and mu, a rate-limited first-order-lag actuator
+(:func:`lag_actuator_force_n`), a linear drift of the offset and a truth-only coupling law
+(:mod:`idtool._simulate._truth_coupling`). Their random draws come from one child stream of
+the trace's stream (``rng.spawn(1)``), which leaves the trace's own stream untouched: with
+the departures off the output is bit for bit what it was before they existed, and turning
+on scatter, drift or the truth-only coupling changes none of the noise (the lag actuator
+and another sample rate change the trace lengths, hence the noise).
+
+The truth (:class:`BenchTruth`, written as ``true_parameters.json``) holds per trace its
+FR, mu and OFF level as drawn, and per operating point the FR without scatter
+(:func:`true_friction_ratio` gives it at any operating point).
 """
 
 from __future__ import annotations
@@ -27,24 +41,38 @@ from idtool._data._write import document, json_bytes, render_table, trace_entry,
 from idtool._errors import IdtoolError
 from idtool._model._bench import TraceTiming, dahl_at_load, mean_force_n, on_friction_ratio
 from idtool._simulate._noise import ar1_noise, mains_hum, quantise, white_noise
-from idtool._simulate._params import BenchParams
+from idtool._simulate._params import ActuatorParams, BenchParams
 
 __all__ = [
     "TRUTH_FILE",
     "BenchTruth",
     "OperatingPoint",
+    "OperatingPointTruth",
     "TraceTruth",
     "experiment_plan",
+    "lag_actuator_force_n",
+    "noise_free_force_n",
     "operating_point",
     "simulate_bench",
+    "true_friction_ratio",
     "write_simulation",
 ]
 
 TRUTH_FILE = "true_parameters.json"
 MAX_SAMPLES = 5e7  # all traces together: about 1 GB of doubles in flight
+# The lag actuator's start-up counts as over once the exponential tail is down to
+# exp(-5) < 1% of where it started: the steady OFF sliding is measured from there.
+LAG_SETTLE_TIME_CONSTANTS = 5.0
+# The lag actuator "reaches" the ON level when within this fraction of the ON-OFF depth.
+LAG_REACH_FRACTION = 0.02
 
-# Compiled once per trace length; run op by op, every length would recompile each op.
+# Compiled once per padded length (below); run op by op, every length would recompile
+# each op.
 _mean_force_n = jax.jit(mean_force_n)
+# Times are padded to a multiple of this many samples before the compiled bench model, so
+# traces of nearly equal length (scatter moves every trace's length) share one compilation.
+# The model is elementwise in time, so the padding changes no value.
+_PAD_SAMPLES = 4096
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,17 +90,25 @@ class TraceTruth:
     """What produced one simulated trace.
 
     Attributes:
-        friction_ratio: FR = ON level / OFF level of the contact model.
-        off_force_n, on_force_n: ``mu N`` and ``FR mu N`` [N], without the offset.
+        friction_ratio: this trace's FR = ON level / OFF level, with its pull-to-pull
+            scatter (without scatter, ``operating_point_friction_ratio``).
+        off_force_n, on_force_n: this trace's ``mu N`` and ``FR mu N`` [N], with scatter,
+            without the offset.
         slip_amplitude_m: effective slip amplitude a from the coupling [m].
         velocity_ratio: VR = v / (a w) (None without vibration).
-        dimensionless_stiffness: Lambda = Kt a / (mu N).
-        load_cell_offset_n: this trace's offset [N].
+        dimensionless_stiffness: Lambda = Kt a / (mu N), at the nominal mu.
+        load_cell_offset_n: this trace's offset at time 0 [N].
         startup_s: pull start [s].
         logged_on_s, horn_on_s: ON window of the logged flag and of the horn [s]
             (None without ON).
         mains_phase_rad: phase of the hum.
-        reaches_on_level: whether the force gets down to the ON level before OFF.
+        reaches_on_level: whether the force gets down to the ON level before OFF (lag
+            actuator: to within ``LAG_REACH_FRACTION`` of the ON-OFF depth).
+        friction_coefficient: this trace's mu [-], with scatter.
+        operating_point_friction_ratio: FR of the operating point without scatter.
+        offset_drift_n_s: this trace's offset drift rate [N/s]: the offset at time t is
+            ``load_cell_offset_n + offset_drift_n_s * t``.
+        startup_end_s: end of the start-up rise [s]; the steady OFF sliding follows.
     """
 
     id: str
@@ -91,6 +127,32 @@ class TraceTruth:
     horn_on_s: tuple[float, float] | None
     mains_phase_rad: float
     reaches_on_level: bool
+    friction_coefficient: float
+    operating_point_friction_ratio: float
+    offset_drift_n_s: float
+    startup_end_s: float
+
+
+@dataclasses.dataclass(frozen=True)
+class OperatingPointTruth:
+    """The contact model at one operating point, without pull-to-pull scatter.
+
+    Attributes:
+        friction_ratio: FR [-], the median of the traces' FR under scatter (their mean is
+            ``exp(friction_ratio_sd^2 / 2)`` times larger, before the cap at 1): the
+            curve a fit should recover.
+        slip_amplitude_m: effective slip amplitude a [m].
+        velocity_ratio: VR = v / (a w) (None without vibration).
+        dimensionless_stiffness: Lambda = Kt a / (mu N).
+    """
+
+    normal_load_n: float
+    amplitude_fraction: float
+    pull_speed_m_s: float
+    friction_ratio: float
+    slip_amplitude_m: float
+    velocity_ratio: float | None
+    dimensionless_stiffness: float
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,9 +163,15 @@ class BenchTruth:
     params: BenchParams
     traces: tuple[TraceTruth, ...]
     dataset_sha256: str
+    operating_points: tuple[OperatingPointTruth, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
-        """The JSON document: the identifiable parameters first, then per trace, then all."""
+        """The JSON document: the identifiable parameters first, then per operating point
+        and per trace, then all parameters.
+
+        ``coupling_in_fit`` is false for a truth-only coupling law: the fit cannot
+        represent the truth, so its coupling parameters have no true value to cover.
+        """
         from idtool._version import (
             __version__,  # here: idtool/__init__ imports this module before defining it
         )
@@ -117,6 +185,8 @@ class BenchTruth:
             "friction_coefficient": contact.friction_coefficient,
             "contact_stiffness_n_m": contact.contact_stiffness_n_m,
             "coupling": self.params.to_dict()["coupling"],
+            "coupling_in_fit": self.params.coupling.in_fit,
+            "operating_points": [dataclasses.asdict(o) for o in self.operating_points],
             "traces": [dataclasses.asdict(t) for t in self.traces],
             "params": self.params.to_dict(),
         }
@@ -136,10 +206,16 @@ def experiment_plan(params: BenchParams) -> tuple[OperatingPoint, ...]:
     return tuple(points)
 
 
-def operating_point(params: BenchParams, load_n: float, alpha: float) -> dict[str, float]:
-    """FR, slip amplitude [m], VR and Lambda of the contact model at one operating point."""
+def operating_point(
+    params: BenchParams, load_n: float, alpha: float, speed_m_s: float | None = None
+) -> dict[str, float]:
+    """FR, slip amplitude [m], VR and Lambda of the contact model at one operating point.
+
+    ``load_n`` [N], ``alpha`` the amplitude fraction [-], ``speed_m_s`` the pull speed
+    [m/s] (default: the experiments'). Without pull-to-pull scatter.
+    """
     c, rig = params.contact, params.rig
-    v = params.experiments.pull_speed_m_s
+    v = params.experiments.pull_speed_m_s if speed_m_s is None else speed_m_s
     coupling = params.coupling.model()
     law = dahl_at_load(c.friction_coefficient, jnp.asarray(c.contact_stiffness_n_m), load_n)
     fr = on_friction_ratio(
@@ -161,13 +237,43 @@ def operating_point(params: BenchParams, load_n: float, alpha: float) -> dict[st
     }
 
 
+def true_friction_ratio(
+    params: BenchParams,
+    load_n: float,
+    amplitude_fraction: float,
+    speed_m_s: float | None = None,
+) -> float:
+    """The true FR [-] at any operating point, without pull-to-pull scatter.
+
+    ``load_n`` [N], ``amplitude_fraction`` [-] in [0, 1], ``speed_m_s`` the pull speed
+    [m/s] (default: the experiments'). This is the curve a fit should recover, also at
+    operating points the experiments did not measure (the truth-only coupling included).
+    """
+    return operating_point(params, load_n, amplitude_fraction, speed_m_s)["friction_ratio"]
+
+
+def _startup_duration_s(act: ActuatorParams, off_n: float) -> float:
+    """Time [s] from the pull start until the force has risen to the OFF level ``off_n``."""
+    if act.model == "lag":
+        tau, rate = _lag_constants(act)
+        return max(off_n - rate * tau, 0.0) / rate + LAG_SETTLE_TIME_CONSTANTS * tau
+    assert act.startup_slope_n_s is not None  # the schema requires it with model 'slope'
+    return off_n / act.startup_slope_n_s
+
+
+def _lag_constants(act: ActuatorParams) -> tuple[float, float]:
+    """Time constant [s] and rate limit [N/s] of the lag actuator."""
+    assert act.time_constant_s is not None and act.rate_limit_n_s is not None  # schema
+    return act.time_constant_s, act.rate_limit_n_s
+
+
 def _total_samples(params: BenchParams, plan: tuple[OperatingPoint, ...]) -> float:
     """About how many samples the plan writes, all traces together."""
     act, e = params.actuator, params.experiments
     mu = params.contact.friction_coefficient
     seconds = sum(
         act.pull_start_s
-        + mu * point.normal_load_n / act.startup_slope_n_s
+        + _startup_duration_s(act, mu * point.normal_load_n)
         + e.sliding_before_s
         + point.on_duration_s
         + e.sliding_after_s
@@ -176,12 +282,132 @@ def _total_samples(params: BenchParams, plan: tuple[OperatingPoint, ...]) -> flo
     return seconds * e.sample_rate_hz
 
 
+def _lag_step(
+    elapsed_s: np.ndarray, start_n: float, target_n: float, tau_s: float, rate_n_s: float
+) -> np.ndarray:
+    """Exact solution of ``dF/dt = clip((target - F) / tau, -rate, rate)`` from ``start_n``.
+
+    While ``|target - F| > rate tau`` the force moves at the rate limit; from then on it
+    approaches the target exponentially with time constant ``tau`` (where the exponential's
+    own rate is below the limit). Exact for any ``elapsed_s`` >= 0, so the curve does not
+    depend on the sample rate.
+    """
+    gap = target_n - start_n
+    direction = math.copysign(1.0, gap)
+    tail = min(abs(gap), rate_n_s * tau_s)  # the gap when the exponential part starts
+    limited_s = (abs(gap) - tail) / rate_n_s  # duration of the rate-limited part
+    linear = start_n + direction * rate_n_s * elapsed_s
+    # The clip keeps exp() from overflowing where the linear branch is taken anyway.
+    decay = np.exp(-np.maximum(elapsed_s - limited_s, 0.0) / tau_s)
+    return np.where(elapsed_s < limited_s, linear, target_n - direction * tail * decay)
+
+
+def lag_actuator_force_n(
+    time_s: np.ndarray,
+    off_force_n: float,
+    on_force_n: float,
+    startup_s: float,
+    horn_on_s: tuple[float, float] | None,
+    time_constant_s: float,
+    rate_limit_n_s: float,
+) -> np.ndarray:
+    """Noise-free force [N] (without offset) of the rate-limited first-order-lag actuator.
+
+    The target is 0 before ``startup_s`` [s], then ``off_force_n`` [N], ``on_force_n`` [N]
+    while the horn is ON (``horn_on_s``, [s]; None for no ON window) and ``off_force_n``
+    after; the force follows it by ``dF/dt = clip((target - F) / time_constant_s,
+    -rate_limit_n_s, +rate_limit_n_s)`` from 0, solved exactly on each constant-target
+    segment (the switchings need not fall on samples).
+    """
+    t = np.asarray(time_s, dtype=np.float64)
+    switches = [startup_s]
+    targets = [off_force_n]
+    if horn_on_s is not None:
+        switches += [horn_on_s[0], horn_on_s[1]]
+        targets += [on_force_n, off_force_n]
+    out = np.zeros_like(t)
+    level = 0.0  # the force at the start of the current segment; 0 before the pull
+    for k, (start, target) in enumerate(zip(switches, targets, strict=True)):
+        end = switches[k + 1] if k + 1 < len(switches) else math.inf
+        inside = (t >= start) & (t < end)
+        out[inside] = _lag_step(t[inside] - start, level, target, time_constant_s, rate_limit_n_s)
+        if math.isfinite(end):
+            span = np.array([end - start])
+            level = float(_lag_step(span, level, target, time_constant_s, rate_limit_n_s)[0])
+    return out
+
+
+def noise_free_force_n(params: BenchParams, trace: TraceTruth, time_s: np.ndarray) -> np.ndarray:
+    """The force [N] a trace was made from before noise, hum and quantisation.
+
+    The actuator's response to the trace's OFF and ON levels at the horn's (physical) ON
+    window, plus the load-cell offset and its drift.
+    """
+    act = params.actuator
+    time_s = np.asarray(time_s, dtype=np.float64)
+    if act.model == "lag":
+        tau, rate = _lag_constants(act)
+        force = trace.load_cell_offset_n + lag_actuator_force_n(
+            time_s, trace.off_force_n, trace.on_force_n, trace.startup_s, trace.horn_on_s, tau, rate
+        )
+    else:
+        assert act.slope_n_s is not None and act.startup_slope_n_s is not None  # schema
+        horn = trace.horn_on_s
+        timing = TraceTiming(
+            startup_s=trace.startup_s,
+            on_start_s=horn[0] if horn else math.inf,
+            on_end_s=horn[1] if horn else math.inf,
+        )
+        n = time_s.size
+        padded = np.pad(time_s, (0, -n % _PAD_SAMPLES), mode="edge")
+        force = np.asarray(
+            _mean_force_n(
+                padded,
+                trace.off_force_n,
+                trace.on_force_n,
+                timing,
+                act.slope_n_s,
+                act.startup_slope_n_s,
+                trace.load_cell_offset_n,
+                act.corner_n,
+            )
+        )[:n]
+    if trace.offset_drift_n_s != 0.0:  # skipped at 0 so the default output is unchanged
+        force = force + trace.offset_drift_n_s * time_s
+    return force
+
+
+def _reaches_on_level(params: BenchParams, trace: TraceTruth) -> bool:
+    """Whether the force gets down to the ON level before the horn switches OFF."""
+    act, horn = params.actuator, trace.horn_on_s
+    if horn is None:
+        return False
+    depth = trace.off_force_n - trace.on_force_n
+    if act.model == "lag":
+        end = np.array([horn[1]])
+        tau, rate = _lag_constants(act)
+        lowest = lag_actuator_force_n(
+            end, trace.off_force_n, trace.on_force_n, trace.startup_s, horn, tau, rate
+        )[0]
+        return bool(lowest - trace.on_force_n <= LAG_REACH_FRACTION * depth)
+    assert act.slope_n_s is not None  # the schema requires it with model 'slope'
+    return bool(act.slope_n_s * (horn[1] - horn[0]) >= depth)
+
+
 def _simulate_trace(
-    params: BenchParams, point: OperatingPoint, rng: np.random.Generator
+    params: BenchParams,
+    point: OperatingPoint,
+    op: OperatingPointTruth,
+    rng: np.random.Generator,
 ) -> tuple[TraceTruth, np.ndarray, np.ndarray, np.ndarray]:
-    """Truth, times [s], forces [N] and logged ON flags of one trace."""
+    """Truth, times [s], forces [N] and logged ON flags of one trace (``op``: its
+    operating point)."""
     act, cell, e = params.actuator, params.load_cell, params.experiments
     fs = e.sample_rate_hz
+    # The departures draw from a child of the trace's stream: spawning draws nothing from
+    # ``rng``, so the draws below (and all the noise) are those of a simulation without
+    # departures. Three normals always, so turning one departure on changes no other's.
+    z_ratio, z_mu, z_drift = rng.spawn(1)[0].standard_normal(3).tolist()
     # Draw order is fixed so that a seed reproduces every trace.
     offset = cell.offset_mean_n + cell.offset_std_n * rng.standard_normal()
     switching = params.horn_switching
@@ -190,10 +416,18 @@ def _simulate_trace(
     ).tolist()
     phase = float(rng.uniform(0.0, 2.0 * np.pi))
 
-    op = operating_point(params, point.normal_load_n, point.amplitude_fraction)
-    off = params.contact.friction_coefficient * point.normal_load_n
-    on_level = op["friction_ratio"] * off
-    i_on = round((act.pull_start_s + off / act.startup_slope_n_s + e.sliding_before_s) * fs)
+    scatter = params.scatter
+    mu = params.contact.friction_coefficient * math.exp(scatter.friction_coefficient_sd * z_mu)
+    ratio = min(op.friction_ratio * math.exp(scatter.friction_ratio_sd * z_ratio), 1.0)
+    drift = cell.offset_drift_sd_n_s * z_drift
+    off = mu * point.normal_load_n
+    on_level = ratio * off
+    startup_end = act.pull_start_s + _startup_duration_s(act, off)
+    # The logged ON window is planned from the nominal OFF level, so scatter changes the
+    # levels but neither the timing nor the trace length (hence none of the noise draws).
+    nominal_off = params.contact.friction_coefficient * point.normal_load_n
+    planned_startup_end = act.pull_start_s + _startup_duration_s(act, nominal_off)
+    i_on = round((planned_startup_end + e.sliding_before_s) * fs)
     i_off = i_on + round(point.on_duration_s * fs)
     n = i_off + round(e.sliding_after_s * fs) + 1
     time_s = np.arange(n) / fs
@@ -204,39 +438,59 @@ def _simulate_trace(
     horn = None
     if logged is not None:
         horn = (logged[0] + lag_on, max(logged[1] + lag_off, logged[0] + lag_on))
-    timing = TraceTiming(
-        startup_s=act.pull_start_s,
-        on_start_s=horn[0] if horn else math.inf,
-        on_end_s=horn[1] if horn else math.inf,
-    )
-    mean = _mean_force_n(
-        time_s, off, on_level, timing, act.slope_n_s, act.startup_slope_n_s, offset, act.corner_n
-    )
-    noisy = (
-        np.asarray(mean)
-        + white_noise(rng, n, cell.white_noise_std_n)
-        + ar1_noise(rng, n, cell.correlated_noise_std_n, cell.correlated_noise_time_s, fs)
-        + mains_hum(time_s, cell.mains_amplitude_n, cell.mains_frequency_hz, phase)
-    )
     truth = TraceTruth(
         id=point.id,
         normal_load_n=point.normal_load_n,
         amplitude_fraction=point.amplitude_fraction,
         on_duration_s=point.on_duration_s,
-        friction_ratio=op["friction_ratio"],
+        friction_ratio=ratio,
         off_force_n=off,
         on_force_n=on_level,
-        slip_amplitude_m=op["slip_amplitude_m"],
-        velocity_ratio=op["velocity_ratio"] if math.isfinite(op["velocity_ratio"]) else None,
-        dimensionless_stiffness=op["dimensionless_stiffness"],
+        slip_amplitude_m=op.slip_amplitude_m,
+        velocity_ratio=op.velocity_ratio,
+        dimensionless_stiffness=op.dimensionless_stiffness,
         load_cell_offset_n=float(offset),
         startup_s=act.pull_start_s,
         logged_on_s=logged,
         horn_on_s=horn,
         mains_phase_rad=phase,
-        reaches_on_level=bool(horn and act.slope_n_s * (horn[1] - horn[0]) >= off - on_level),
+        reaches_on_level=False,
+        friction_coefficient=mu,
+        operating_point_friction_ratio=op.friction_ratio,
+        offset_drift_n_s=drift,
+        startup_end_s=startup_end,
+    )
+    truth = dataclasses.replace(truth, reaches_on_level=_reaches_on_level(params, truth))
+    noisy = (
+        noise_free_force_n(params, truth, time_s)
+        + white_noise(rng, n, cell.white_noise_std_n)
+        + ar1_noise(rng, n, cell.correlated_noise_std_n, cell.correlated_noise_time_s, fs)
+        + mains_hum(time_s, cell.mains_amplitude_n, cell.mains_frequency_hz, phase)
     )
     return truth, time_s, quantise(noisy, cell.adc_lsb_n), flags
+
+
+def _operating_point_truths(
+    params: BenchParams, plan: tuple[OperatingPoint, ...]
+) -> dict[tuple[float, float], OperatingPointTruth]:
+    """The contact model at each distinct (load, amplitude) of the plan, in plan order."""
+    out: dict[tuple[float, float], OperatingPointTruth] = {}
+    v = params.experiments.pull_speed_m_s
+    for point in plan:
+        key = (point.normal_load_n, point.amplitude_fraction)
+        if key not in out:
+            op = operating_point(params, *key)
+            vr = op["velocity_ratio"]
+            out[key] = OperatingPointTruth(
+                normal_load_n=key[0],
+                amplitude_fraction=key[1],
+                pull_speed_m_s=v,
+                friction_ratio=op["friction_ratio"],
+                slip_amplitude_m=op["slip_amplitude_m"],
+                velocity_ratio=vr if math.isfinite(vr) else None,
+                dimensionless_stiffness=op["dimensionless_stiffness"],
+            )
+    return out
 
 
 def simulate_bench(
@@ -261,10 +515,12 @@ def simulate_bench(
             "lower experiments.sample_rate_hz, the durations or the matrix"
         )
     suffix = ".parquet" if p.output.trace_format == "parquet" else ".csv"
+    points = _operating_point_truths(p, plan)
     files: dict[str, bytes] = {}
     entries, truths = [], []
     for point, rng in zip(plan, np.random.default_rng(seed).spawn(len(plan)), strict=True):
-        truth, time_s, force_n, flags = _simulate_trace(p, point, rng)
+        op = points[(point.normal_load_n, point.amplitude_fraction)]
+        truth, time_s, force_n, flags = _simulate_trace(p, point, op, rng)
         file = f"traces/{point.id}{suffix}"
         files[file] = render_table(file, time_s, force_n, flags)
         entries.append(
@@ -283,7 +539,7 @@ def simulate_bench(
     )
     doc = json_bytes(document(p.name, p.material, p.rig, entries, description))
     dataset = dataset_from_bytes(doc, files, label=f"simulated dataset (seed {seed})")
-    return dataset, BenchTruth(seed, p, tuple(truths), dataset.sha256)
+    return dataset, BenchTruth(seed, p, tuple(truths), dataset.sha256, tuple(points.values()))
 
 
 def write_simulation(

@@ -1,0 +1,474 @@
+"""Pull-to-pull scatter and model discrepancy: the hierarchical model of the levels (issue 10).
+
+A real bench does not repeat itself: two pulls at the same load and amplitude give
+friction ratios a few percent apart (webbing wear and position, horn heating), their OFF
+levels differ by ~1% in mu, and the physical model's curve cannot pass exactly through
+every operating point (its coupling law has a shape; the bench's has another). A fit that
+knows only the load cell's noise then reports bands of +-0.001 around a curve that is
+0.03 off. This module adds the missing variance, nested so that zero gives today's model:
+
+    log OFF_i = log F_off(theta; N_i)        + a_i          a_i ~ N(0, scatter_mu^2)
+    log FR_i  = log FR(theta; load, alpha, v)_op(i) + d_op(i) + c_i
+                                     d_op ~ N(0, discrepancy_fr^2),  c_i ~ N(0, scatter_fr^2)
+
+(log scale: each sd is a relative one; ``FR x sd`` in FR units). ``a`` and ``c`` are
+per trace (pull), ``d`` per distinct operating point. With a single trace per operating
+point ``c`` and ``d`` cannot be told apart: their sum is estimated as ``discrepancy_fr``
+and the report says so.
+
+Estimation, in two stages (a Laplace approximation of the marginal likelihood):
+
+1. **Free levels** (:func:`free_levels`): every trace's OFF and ON levels are fitted
+   freely, with the bench nuisances (offsets, pull starts, horn lags, actuator slopes),
+   on the same AR(1)-whitened block means as the fit. Their estimates ``y`` (log OFF,
+   log FR) and covariance ``V`` summarise what the traces say about the levels; the
+   bench model is linear in the levels, so this summary loses nothing to first order.
+   An ON window too short for the force to settle (``MIN_AT_LEVEL_S``) does not measure
+   its ON level: that trace's FR is left out (its OFF level stays).
+2. **Levels model**: ``y ~ N(g(theta), V + Sigma(sds))`` with ``g`` the physical model's
+   log levels. The sds are estimated by restricted maximum likelihood (REML: the
+   physical parameters profiled on the linearised model, so that fitting k parameters
+   to a few operating points does not bias the discrepancy low, as plain ML would), with
+   optimistix's BFGS on the log sds, alternated with Gauss-Newton steps in theta.
+   Each sd's uncertainty is its REML likelihood on a grid (flat prior on the sd, the
+   others at their estimates): its 95% interval and the draws that predictions
+   integrate over come from it, so a discrepancy seen at four operating points widens
+   the bands by what four points can tell.
+
+Lack of fit: at zero sds, ``chi2 = r^T V^-1 r`` of the free levels against the model's
+curve has ``n - k`` degrees of freedom if the physical model and the noise explain the
+traces; a small p-value is reported as a warning.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jax.scipy.linalg import cho_solve
+
+from idtool._fit._fit import FitResult, estimate_of, run_lm
+from idtool._model._benchmodel import BenchModel
+from idtool._model._params import Param
+
+__all__ = [
+    "MIN_AT_LEVEL_S",
+    "SD_PARAMS",
+    "FreeLevels",
+    "LevelDesign",
+    "Variability",
+    "estimate_variability",
+    "free_levels",
+    "level_design",
+    "with_variability",
+]
+
+# An ON level counts as measured when the force sits at it for this long (about four
+# 40 ms blocks): shorter, the trace only bounds it (its depth is beyond the slope's reach).
+MIN_AT_LEVEL_S = 0.15
+SD_PARAMS = (
+    Param(
+        "scatter_mu",
+        "1",
+        "log",
+        1e-6,
+        2.0,
+        description="pull-to-pull sd of the OFF level (relative)",
+    ),
+    Param(
+        "scatter_fr",
+        "1",
+        "log",
+        1e-6,
+        2.0,
+        description="pull-to-pull sd of the friction ratio (relative)",
+    ),
+    Param(
+        "discrepancy_fr",
+        "1",
+        "log",
+        1e-6,
+        2.0,
+        description="operating-point sd of the friction ratio about the physical model "
+        "(relative): what the model's curve misses",
+    ),
+)
+_GRID = 241  # points of each sd's REML likelihood grid
+
+
+@dataclasses.dataclass(frozen=True)
+class FreeLevels:
+    """Every trace's OFF and ON level fitted freely (stage 1, module docstring).
+
+    ``y`` holds log OFF for every trace, then log FR for the traces in ``measured``;
+    ``cov_y`` its covariance (AR(1) noise, nuisances and shared slopes integrated).
+    """
+
+    off_n: np.ndarray
+    on_n: np.ndarray
+    measured: np.ndarray  # (traces,) the ON level is reached and measured
+    y: np.ndarray
+    cov_y: np.ndarray
+    sigma_n: float
+
+    @property
+    def friction_ratio(self) -> np.ndarray:
+        """Each trace's own FR (NaN where its ON level is not measured)."""
+        return np.where(self.measured, self.on_n / self.off_n, np.nan)
+
+    @property
+    def friction_ratio_se(self) -> np.ndarray:
+        m = self.off_n.size
+        se = np.full(m, np.nan)
+        k = np.flatnonzero(self.measured)
+        se_log = np.sqrt(np.diag(self.cov_y)[m:])
+        se[k] = self.friction_ratio[k] * se_log
+        return se
+
+
+def _at_level_s(model: BenchModel, z: np.ndarray) -> np.ndarray:
+    """Per trace: how long the force sits at its ON level [s] (-inf without ON)."""
+    d = model.data
+    v = model.values(jnp.asarray(z))
+    off, on, _ = (np.asarray(x) for x in model.levels(v))
+    start = np.asarray(d.on_start_s) + np.asarray(v["delay_on_s"])
+    end = np.asarray(d.on_end_s) + np.asarray(v["delay_off_s"])
+    with np.errstate(invalid="ignore"):
+        length = np.where(np.isfinite(start) & np.isfinite(end), end - start, -np.inf)
+    return length - (off - on) / float(v["slope_n_s"])
+
+
+def _linearise(model: BenchModel, z: np.ndarray, phi: float):
+    """The fit's own linearisation at ``z`` (no new program to compile): the whitened
+    residuals, the levels ``(OFF, ON)``, their Jacobian in the physical parameters and
+    the normal equations in ``u = (OFF, ON, z[k:])``."""
+    out = run_lm(model, jnp.asarray(z), jnp.ones(z.size, bool), phi, 0)
+    return (np.asarray(out.residuals), *(np.asarray(x) for x in out.aux))
+
+
+def free_levels(model: BenchModel, z: np.ndarray, phi: float) -> FreeLevels:
+    """Stage 1: the traces' own levels, from the fit ``z`` (module docstring).
+
+    One Gauss-Newton step in ``u`` from the fit's optimum: the block means are linear
+    in the levels wherever the force sits at them, so the step lands on the free
+    optimum up to the nuisances' second-order terms (tests/test_variability.py checks it
+    against Levenberg-Marquardt run to convergence in ``u``).
+    """
+    k, m = model.n_physical, model.data.n_traces
+    w, lv, _, jtj_u, jtr_u = _linearise(model, z, phi)
+    measured = _at_level_s(model, z) >= MIN_AT_LEVEL_S
+    u0 = np.concatenate([lv, z[k:]])
+    free = np.flatnonzero(np.concatenate([np.ones(m, bool), measured, np.ones(z.size - k, bool)]))
+    jtj = jtj_u[np.ix_(free, free)]
+    u = u0.copy()
+    u[free] -= np.linalg.solve(jtj, jtr_u[free])
+    # the residual sum of squares at the free optimum, to second order
+    rss = float(w @ w) - float(jtr_u[free] @ np.linalg.solve(jtj, jtr_u[free]))
+    sigma2 = rss / (w.size - free.size)
+    cov_u = np.zeros((u.size, u.size))
+    cov_u[np.ix_(free, free)] = sigma2 * np.linalg.inv(jtj)
+    # y = (log OFF, log ON - log OFF for the measured); its Jacobian in u
+    idx = np.flatnonzero(measured)
+    dy = np.zeros((m + idx.size, u.size))
+    dy[np.arange(m), np.arange(m)] = 1.0 / u[:m]
+    dy[m + np.arange(idx.size), m + idx] = 1.0 / u[m + idx]
+    dy[m + np.arange(idx.size), idx] = -1.0 / u[idx]
+    y = np.concatenate([np.log(u[:m]), np.log(u[m + idx] / u[idx])])
+    return FreeLevels(
+        off_n=u[:m],
+        on_n=u[m : 2 * m],
+        measured=measured,
+        y=y,
+        cov_y=dy @ cov_u @ dy.T,
+        sigma_n=math.sqrt(sigma2),
+    )
+
+
+def _model_log_levels(model: BenchModel, z: np.ndarray, phi: float):
+    """log OFF and log FR per trace at ``z`` and their Jacobian in the physical
+    parameters: (2 traces,), (2 traces, k)."""
+    _, lv, dlv, _, _ = _linearise(model, z, phi)
+    m = lv.size // 2
+    off, on = lv[:m], lv[m:]
+    g = np.concatenate([np.log(off), np.log(on / off)])
+    jac = np.concatenate([dlv[:m] / off[:, None], dlv[m:] / on[:, None] - dlv[:m] / off[:, None]])
+    return g, jac
+
+
+# ---------------------------------------------------------------- the levels model
+def _covariance(tau2, v, kinds, zz):
+    """``V + Sigma(sds)``: ``kinds`` (n, 2) one-hot OFF / FR rows, ``zz`` the
+    same-operating-point matrix of the FR rows."""
+    diag = kinds[:, 0] * tau2[0] + kinds[:, 1] * tau2[1]
+    return v + jnp.diag(diag) + tau2[2] * zz
+
+
+def _neg_log_lik(tau2, r, g, v, kinds, zz, restricted):
+    """-log of the (restricted) likelihood of the level residuals ``r`` (theta profiled
+    on the linearised model ``g``), up to a constant; and theta's Gauss-Newton step."""
+    c = _covariance(tau2, v, kinds, zz)
+    chol = jnp.linalg.cholesky(c)
+    ci_r = cho_solve((chol, True), r)
+    ci_g = cho_solve((chol, True), g)
+    a = g.T @ ci_g
+    step = jnp.linalg.solve(a, g.T @ ci_r)
+    rt = r - g @ step
+    quad = rt @ cho_solve((chol, True), rt)
+    logdet_c = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol)))
+    logdet_a = jnp.linalg.slogdet(a)[1]
+    return 0.5 * (quad + logdet_c + jnp.where(restricted, logdet_a, 0.0)), step
+
+
+@jax.jit
+def _fit_sds(s0, free, r, g, v, kinds, zz):
+    """REML log sds (optimistix BFGS); the sds outside ``free`` stay 0."""
+
+    def loss(s, _):
+        return _neg_log_lik(free * jnp.exp(2.0 * s), r, g, v, kinds, zz, True)[0]
+
+    sol: optx.Solution = optx.minimise(
+        loss, optx.BFGS(rtol=1e-8, atol=1e-8), s0, max_steps=200, throw=False
+    )
+    return sol.value
+
+
+@jax.jit
+def _evaluate(tau2_rows, r, g, v, kinds, zz, restricted):
+    """-log (restricted) likelihood and theta's step at every row of ``tau2_rows``
+    (rows, 3): one program for the profiles and the steps."""
+    return jax.vmap(lambda t: _neg_log_lik(t, r, g, v, kinds, zz, restricted))(tau2_rows)
+
+
+def _at(tau2, r, g, args, restricted=False):
+    """:func:`_evaluate` at one ``tau2`` (padded to the grid's shape: one program)."""
+    nll, step = _evaluate(jnp.tile(jnp.asarray(tau2), (_GRID, 1)), r, g, *args, restricted)
+    return float(nll[0]), np.asarray(step[0])
+
+
+@dataclasses.dataclass(frozen=True)
+class Variability:
+    """Scatter and discrepancy sds of a fit (module docstring) and the levels model's
+    estimate of the physical parameters.
+
+    ``sds`` maps each of :data:`SD_PARAMS` to (estimate, ci95 low, ci95 high); ``grids``
+    each to its REML likelihood on a grid ``(sd values, probabilities)``.
+    """
+
+    free: FreeLevels
+    sds: dict[str, tuple[float, float, float]]
+    grids: dict[str, tuple[np.ndarray, np.ndarray]]
+    separable: bool
+    theta: np.ndarray
+    cov_theta: np.ndarray
+    chi2: float
+    dof: int
+    p_value: float
+    loglik: float
+    loglik_without: float  # at zero sds
+    warnings: tuple[str, ...]
+
+    def draw_sds(self, n: int, seed: int = 0) -> dict[str, np.ndarray]:
+        """``n`` draws of every sd from its grid likelihood (seeded)."""
+        rng = np.random.default_rng(seed)
+        out = {}
+        for name, (grid, prob) in self.grids.items():
+            out[name] = rng.choice(grid, size=n, p=prob)
+        return out
+
+    def summary(self) -> str:
+        """One line per sd, in relative terms, for reports."""
+        lines = []
+        for p in SD_PARAMS:
+            if p.name not in self.sds:
+                continue
+            est, lo, hi = self.sds[p.name]
+            lines.append(
+                f"{p.name:15s} {100 * est:6.2f}%  (95% {100 * lo:.2f}-{100 * hi:.2f}%)  "
+                f"{p.description}"
+            )
+        return "\n".join(lines)
+
+
+class NoMeasuredLevels(ValueError):
+    """No trace measures its own friction ratio: the levels model has nothing to fit."""
+
+
+@dataclasses.dataclass(frozen=True)
+class LevelDesign:
+    """Layout of the levels model's data ``y`` (module docstring).
+
+    ``rows``: which of (log OFF per trace, log FR per trace) ``y`` holds; ``kinds``
+    (n, 2) one-hot OFF / FR rows; ``same_op`` (n, n) 1 where two FR rows share an
+    operating point; ``active`` which of :data:`SD_PARAMS` the data can inform
+    (``scatter_fr`` only with repeated operating points).
+    """
+
+    rows: np.ndarray
+    kinds: np.ndarray
+    same_op: np.ndarray
+    op: np.ndarray
+    active: np.ndarray
+
+    @property
+    def separable(self) -> bool:
+        return bool(self.active[1])
+
+
+def level_design(model: BenchModel, measured: np.ndarray) -> LevelDesign:
+    """The :class:`LevelDesign` of ``model``'s traces, ``measured`` their ON levels."""
+    m = model.data.n_traces
+    idx = np.flatnonzero(measured)
+    n = m + idx.size
+    kinds = np.zeros((n, 2))
+    kinds[:m, 0] = 1.0
+    kinds[m:, 1] = 1.0
+    op = np.asarray(model.data.op_index)[idx]
+    same_op = np.zeros((n, n))
+    same_op[m:, m:] = (op[:, None] == op[None, :]).astype(float)
+    repeated = bool(op.size and np.any(np.bincount(op) >= 2))
+    active = np.array([True, repeated, op.size > 0])
+    return LevelDesign(np.concatenate([np.arange(m), m + idx]), kinds, same_op, op, active)
+
+
+def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variability:
+    """Stages 1 and 2 (module docstring) from a converged fit's ``z`` and AR(1) ``phi``."""
+    k = model.n_physical
+    free = free_levels(model, np.asarray(z), phi)
+    design = level_design(model, free.measured)
+    if not design.active[2]:
+        raise NoMeasuredLevels("no trace's ON window is long enough to measure its ON level")
+    rows, op, separable = design.rows, design.op, design.separable
+    mask = design.active.astype(float)
+    args = (jnp.asarray(free.cov_y), jnp.asarray(design.kinds), jnp.asarray(design.same_op))
+    z = np.asarray(z, float)
+    theta = z[:k].copy()
+    s = np.log(np.full(3, 0.01))
+    for _ in range(12):
+        g_all, jac_all = _model_log_levels(model, np.concatenate([theta, z[k:]]), phi)
+        r, g = free.y - g_all[rows], jac_all[rows]
+        s = np.asarray(_fit_sds(jnp.asarray(s), jnp.asarray(mask), r, g, *args))
+        s = np.clip(s, math.log(1e-6), math.log(2.0))
+        tau2 = mask * np.exp(2.0 * s)
+        _, step = _at(tau2, r, g, args)
+        theta = theta + step
+        cov = np.linalg.inv(g.T @ np.linalg.solve(np.asarray(_covariance(tau2, *args)), g))
+        if not np.all(np.diag(cov) > 0.0):
+            raise np.linalg.LinAlgError("they do not inform every physical parameter")
+        if np.max(np.abs(step) / np.sqrt(np.diag(cov))) < 1e-3:
+            break
+    g_all, jac_all = _model_log_levels(model, np.concatenate([theta, z[k:]]), phi)
+    r, g = free.y - g_all[rows], jac_all[rows]
+    c = np.asarray(_covariance(tau2, *args))
+    cov_theta = np.linalg.inv(g.T @ np.linalg.solve(c, g))
+    nll, _ = _at(tau2, r, g, args)
+    nll0, step0 = _at(np.zeros(3), r, g, args)
+    n = r.size
+    const = 0.5 * n * math.log(2 * math.pi)
+
+    # lack of fit at zero sds: the free levels against the model's best curve
+    r0 = r - g @ step0
+    chi2 = float(r0 @ np.linalg.solve(free.cov_y, r0))
+    dof = int(n - k)
+    p_value = float(jax.scipy.special.gammaincc(dof / 2.0, chi2 / 2.0)) if dof > 0 else 1.0
+
+    sds, grids = {}, {}
+    for j, p in enumerate(SD_PARAMS):
+        if mask[j] == 0.0:
+            continue
+        est = math.sqrt(tau2[j])
+        top = max(5.0 * est, 0.02)
+        grid = np.linspace(0.0, top, _GRID)
+        t2 = np.tile(tau2, (_GRID, 1))
+        t2[:, j] = grid**2
+        nl = np.asarray(_evaluate(jnp.asarray(t2), r, g, *args, True)[0])
+        w = np.exp(-(nl - nl.min()))
+        w /= w.sum()
+        cdf = np.cumsum(w)
+        lo = float(grid[np.searchsorted(cdf, 0.025)])
+        hi = float(grid[min(int(np.searchsorted(cdf, 0.975)), _GRID - 1)])
+        sds[p.name] = (est, min(lo, est), max(hi, est))
+        grids[p.name] = (grid, w)
+
+    warnings = []
+    if p_value < 0.01:
+        warnings.append(
+            f"the physical model misses the traces' own levels by more than their noise "
+            f"explains (chi2 = {chi2:.1f} on {dof} degrees of freedom, p = {p_value:.2g}): "
+            "pull-to-pull scatter or model discrepancy; both are in the bands"
+        )
+    if not separable and op.size:
+        warnings.append(
+            "one trace per operating point: pull-to-pull scatter and model discrepancy "
+            "cannot be told apart; discrepancy_fr is their sum"
+        )
+    unmeasured = int(np.count_nonzero(~free.measured))
+    if unmeasured:
+        warnings.append(
+            f"{unmeasured} trace(s) switch the horn off before the force settles at its ON "
+            f"level (< {MIN_AT_LEVEL_S} s at level): their friction ratio is not measured "
+            "on its own and enters the levels model through the OFF level only"
+        )
+    return Variability(
+        free=free,
+        sds=sds,
+        grids=grids,
+        separable=separable,
+        theta=theta,
+        cov_theta=cov_theta,
+        chi2=chi2,
+        dof=dof,
+        p_value=p_value,
+        loglik=-float(nll) - const,
+        loglik_without=-float(nll0) - const,
+        warnings=tuple(warnings),
+    )
+
+
+def with_variability(result: FitResult) -> FitResult:
+    """``result`` under the levels model (module docstring): the physical parameters,
+    their covariance and the per-trace friction ratios from stage 2, the sds and the
+    lack-of-fit test in :attr:`FitResult.variability`, its warnings added. The bench
+    parameters and nuisances stay the fit's."""
+    model = result.model
+    k, m = model.n_physical, model.data.n_traces
+    why = ""
+    try:
+        v = estimate_variability(model, result.z, result.phi)
+        diag = np.diag(v.cov_theta)
+        if not (np.all(np.isfinite(v.cov_theta)) and np.all(diag > 0.0)):
+            why = "they do not inform every physical parameter on their own"
+    except (np.linalg.LinAlgError, NoMeasuredLevels) as err:
+        why = str(err) or "their covariance is singular"
+    if why:
+        note = (
+            f"scatter and discrepancy not estimated: the traces' own levels ({why}); "
+            "the intervals are the noise-only model's and may be too narrow"
+        )
+        return dataclasses.replace(result, warnings=[*result.warnings, note])
+    z = result.z.copy()
+    z[:k] = v.theta
+    cov = result.cov_z.copy()
+    cov[:k, :] = 0.0
+    cov[:, :k] = 0.0
+    cov[:k, :k] = v.cov_theta
+    se_z = np.sqrt(np.diag(v.cov_theta))
+    estimates = dict(result.estimates)
+    for i, spec in enumerate(model.shared_params[:k]):
+        estimates[spec.name] = estimate_of(spec, z[i], se_z[i])
+    g, jac = _model_log_levels(model, z, result.phi)
+    fr = np.exp(g[m:])
+    fr_se = fr * np.sqrt(np.einsum("ij,jk,ik->i", jac[m:], v.cov_theta, jac[m:]))
+    return dataclasses.replace(
+        result,
+        z=z,
+        cov_z=cov,
+        estimates=estimates,
+        friction_ratio=fr,
+        friction_ratio_se=fr_se,
+        warnings=[*result.warnings, *v.warnings],
+        variability=v,
+    )

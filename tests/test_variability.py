@@ -1,0 +1,132 @@
+"""The levels model (idtool/_fit/_variability.py): pull-to-pull scatter, model
+discrepancy, their REML estimates, the lack-of-fit test, and the two prediction bands."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import idtool
+from idtool._fit import _variability as V
+from idtool._predict._predict import Draws, with_variability
+
+
+@pytest.fixture(scope="module")
+def example_fits():
+    ds = idtool.load_dataset(idtool.example_dataset_path())
+    return idtool.fit(ds), idtool.fit(ds, variability=False)
+
+
+def test_neg_log_lik_is_the_gaussian_density_with_theta_profiled():
+    """Independent check of the levels likelihood: the dense multivariate normal
+    log-density of the GLS residual (numpy), and REML's extra log det(G^T C^-1 G)."""
+    rng = np.random.default_rng(0)
+    n, k = 12, 3
+    a = rng.normal(size=(n, n))
+    v = 0.01 * (a @ a.T / n + np.eye(n))
+    kinds = np.zeros((n, 2))
+    kinds[:5, 0] = kinds[5:, 1] = 1.0
+    op = np.array([0, 0, 1, 1, 2, 2, 3])
+    zz = np.zeros((n, n))
+    zz[5:, 5:] = op[:, None] == op[None, :]
+    g, r = rng.normal(size=(n, k)), rng.normal(size=n)
+    tau2 = np.array([0.02, 0.03, 0.05]) ** 2
+    c = v + np.diag(kinds[:, 0] * tau2[0] + kinds[:, 1] * tau2[1]) + tau2[2] * zz
+    ci = np.linalg.inv(c)
+    beta = np.linalg.solve(g.T @ ci @ g, g.T @ ci @ r)
+    e = r - g @ beta
+    ml = 0.5 * (e @ ci @ e + np.linalg.slogdet(c)[1])
+    args = (jnp.asarray(r), jnp.asarray(g), jnp.asarray(v), jnp.asarray(kinds), jnp.asarray(zz))
+    got, step = V._neg_log_lik(jnp.asarray(tau2), *args, False)
+    np.testing.assert_allclose(float(got), ml, rtol=1e-10)
+    np.testing.assert_allclose(np.asarray(step), beta, rtol=1e-8)
+    reml, _ = V._neg_log_lik(jnp.asarray(tau2), *args, True)
+    np.testing.assert_allclose(float(reml) - ml, 0.5 * np.linalg.slogdet(g.T @ ci @ g)[1])
+
+
+def test_clean_example_nests_the_noise_only_fit(example_fits):
+    """On data from the fit's own simulator the sds come out at ~0 and the levels model
+    reproduces the noise-only fit: estimates within 0.1 standard error, errors within 2%
+    (the two stages are a Laplace approximation of the same likelihood)."""
+    on, off = example_fits
+    var = on.result.variability
+    assert var is not None and off.result.variability is None
+    for name in on.model.physical_names:
+        a, b = on.estimates[name], off.estimates[name]
+        assert abs(a.estimate - b.estimate) < 0.1 * b.std_error, name
+        assert abs(a.std_error / b.std_error - 1.0) < 0.02, name
+    for name, (est, lo, hi) in var.sds.items():
+        assert est < 0.003 and lo <= est <= hi, name
+    # lack of fit calibrated: chi2 near its degrees of freedom, no warning
+    assert var.p_value > 0.01 and abs(var.chi2 - var.dof) < 4 * math.sqrt(2 * var.dof)
+    assert not any("misses the traces" in w for w in on.warnings)
+
+
+def test_free_levels_match_the_model_where_it_is_right(example_fits):
+    """Each measured trace's own FR agrees with the fitted curve within its errors."""
+    on, _ = example_fits
+    free = on.result.variability.free
+    k = free.measured
+    z = (free.friction_ratio[k] - on.result.friction_ratio[k]) / free.friction_ratio_se[k]
+    assert k.sum() >= 10
+    assert np.max(np.abs(z)) < 4.0 and abs(np.mean(z)) < 1.0
+
+
+def test_bands_carry_discrepancy_and_scatter():
+    """with_variability: zero sds leave the curve alone; a scatter widens only the
+    new-pull band; a discrepancy widens both; both are capped at FR = 1."""
+    rng = np.random.default_rng(1)
+    fr = 0.3 + 0.001 * rng.standard_normal((4000, 1))
+    base = Draws(None, {}, "fit covariance", "")  # type: ignore[arg-type]
+    mean, new = with_variability(fr, base)
+    assert mean is fr and new is fr
+    sds = {"discrepancy_fr": np.zeros(4000), "scatter_fr": np.full(4000, 0.05)}
+    mean, new = with_variability(fr, dataclasses.replace(base, sds=sds))
+    assert np.std(mean) == pytest.approx(0.001, rel=0.05)
+    assert np.std(np.log(new)) == pytest.approx(0.05, rel=0.05)
+    sds = {"discrepancy_fr": np.full(4000, 0.05), "scatter_fr": np.zeros(4000)}
+    mean, _ = with_variability(fr, dataclasses.replace(base, sds=sds))
+    assert np.std(np.log(mean)) == pytest.approx(0.05, rel=0.05)
+    mean, new = with_variability(np.full((4000, 1), 0.99), dataclasses.replace(base, sds=sds))
+    assert mean.max() <= 1.0 and new.max() <= 1.0
+
+
+def test_predictions_report_both_bands(example_fits):
+    on, _ = example_fits
+    p = on.predict(450, [0.5, 0.7])
+    row = p.to_dict()["rows"][0]
+    assert set(row) >= {"friction_ratio", "new_trace"}
+    lo, hi = row["new_trace"]["ci95"]
+    mlo, mhi = row["friction_ratio"]["ci95"]
+    assert lo <= row["new_trace"]["median"] <= hi
+    assert hi - lo >= 0.95 * (mhi - mlo)
+    assert "REML" in p.note
+
+
+def test_saved_fit_keeps_the_levels_model(example_fits, tmp_path):
+    on, _ = example_fits
+    out = on.save(tmp_path / "fit")
+    back = idtool.load_fit(out)
+    assert back.levels is not None
+    free, sds = back.levels
+    np.testing.assert_array_equal(free.y, on.result.variability.free.y)
+    assert set(sds) == set(on.result.variability.sds)
+    a = on.predict(450, 0.5).to_dict()["rows"][0]
+    b = back.predict(450, 0.5).to_dict()["rows"][0]
+    assert a["new_trace"]["median"] == pytest.approx(b["new_trace"]["median"])
+    assert a["new_trace"]["ci95"] == pytest.approx(b["new_trace"]["ci95"])
+
+
+def test_levels_posterior_samples_the_sds(example_fits):
+    on, _ = example_fits
+    post = on.sample(walkers=20, steps=150, seed=3)
+    assert post.noise == "levels"
+    assert {"scatter_mu", "scatter_fr", "discrepancy_fr"} <= set(post.names)
+    again = on.sample(walkers=20, steps=150, seed=3)
+    np.testing.assert_array_equal(post.chain, again.chain)
+    draws = post.draws()
+    assert np.all(draws["discrepancy_fr"] > 0)
