@@ -130,11 +130,12 @@ class FreeLevels:
         return se
 
 
-def _at_level_s(model: BenchModel, z: np.ndarray) -> np.ndarray:
-    """Per trace: how long the force sits at its ON level [s] (-inf without ON)."""
+def _at_level_s(model: BenchModel, z: np.ndarray, levels: np.ndarray) -> np.ndarray:
+    """Per trace: how long the force sits at its ON level [s] (-inf without ON), from
+    the levels ``(OFF, ON)`` [N] at ``z``."""
     d = model.data
     v = model.values(jnp.asarray(z))
-    off, on, _ = (np.asarray(x) for x in model.levels(v))
+    off, on = np.split(levels, 2)
     start = np.asarray(d.on_start_s) + np.asarray(v["delay_on_s"])
     end = np.asarray(d.on_end_s) + np.asarray(v["delay_off_s"])
     with np.errstate(invalid="ignore"):
@@ -155,19 +156,20 @@ def free_levels(model: BenchModel, z: np.ndarray, phi: float) -> FreeLevels:
 
     One Gauss-Newton step in ``u`` from the fit's optimum: the block means are linear
     in the levels wherever the force sits at them, so the step lands on the free
-    optimum up to the nuisances' second-order terms (tests/test_variability.py checks it
-    against Levenberg-Marquardt run to convergence in ``u``).
+    optimum up to the nuisances' second-order terms (on the example, Levenberg-Marquardt
+    run to convergence in ``u`` moved the free FRs by ~1e-4, a twentieth of their
+    standard errors; measured while this was written, not a test).
     """
     k, m = model.n_physical, model.data.n_traces
     w, lv, _, jtj_u, jtr_u = _linearise(model, z, phi)
-    measured = _at_level_s(model, z) >= MIN_AT_LEVEL_S
-    u0 = np.concatenate([lv, z[k:]])
+    measured = _at_level_s(model, z, lv) >= MIN_AT_LEVEL_S
+    u = np.concatenate([lv, z[k:]])
     free = np.flatnonzero(np.concatenate([np.ones(m, bool), measured, np.ones(z.size - k, bool)]))
     jtj = jtj_u[np.ix_(free, free)]
-    u = u0.copy()
-    u[free] -= np.linalg.solve(jtj, jtr_u[free])
+    step = np.linalg.solve(jtj, jtr_u[free])
+    u[free] -= step
     # the residual sum of squares at the free optimum, to second order
-    rss = float(w @ w) - float(jtr_u[free] @ np.linalg.solve(jtj, jtr_u[free]))
+    rss = float(w @ w) - float(jtr_u[free] @ step)
     sigma2 = rss / (w.size - free.size)
     cov_u = np.zeros((u.size, u.size))
     cov_u[np.ix_(free, free)] = sigma2 * np.linalg.inv(jtj)
@@ -271,14 +273,6 @@ class Variability:
     loglik_without: float  # at zero sds
     warnings: tuple[str, ...]
 
-    def draw_sds(self, n: int, seed: int = 0) -> dict[str, np.ndarray]:
-        """``n`` draws of every sd from its grid likelihood (seeded)."""
-        rng = np.random.default_rng(seed)
-        out = {}
-        for name, (grid, prob) in self.grids.items():
-            out[name] = rng.choice(grid, size=n, p=prob)
-        return out
-
     def summary(self) -> str:
         """One line per sd, in relative terms, for reports."""
         lines = []
@@ -341,7 +335,7 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
     design = level_design(model, free.measured)
     if not design.active[2]:
         raise NoMeasuredLevels("no trace's ON window is long enough to measure its ON level")
-    rows, op, separable = design.rows, design.op, design.separable
+    rows, separable = design.rows, design.separable
     mask = design.active.astype(float)
     args = (jnp.asarray(free.cov_y), jnp.asarray(design.kinds), jnp.asarray(design.same_op))
     z = np.asarray(z, float)
@@ -364,6 +358,8 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
     r, g = free.y - g_all[rows], jac_all[rows]
     c = np.asarray(_covariance(tau2, *args))
     cov_theta = np.linalg.inv(g.T @ np.linalg.solve(c, g))
+    if not (np.all(np.isfinite(cov_theta)) and np.all(np.diag(cov_theta) > 0.0)):
+        raise np.linalg.LinAlgError("they do not inform every physical parameter")
     nll, _ = _at(tau2, r, g, args)
     nll0, step0 = _at(np.zeros(3), r, g, args)
     n = r.size
@@ -400,7 +396,7 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
             f"explains (chi2 = {chi2:.1f} on {dof} degrees of freedom, p = {p_value:.2g}): "
             "pull-to-pull scatter or model discrepancy; both are in the bands"
         )
-    if not separable and op.size:
+    if not separable:
         warnings.append(
             "one trace per operating point: pull-to-pull scatter and model discrepancy "
             "cannot be told apart; discrepancy_fr is their sum"
@@ -435,15 +431,10 @@ def with_variability(result: FitResult) -> FitResult:
     parameters and nuisances stay the fit's."""
     model = result.model
     k, m = model.n_physical, model.data.n_traces
-    why = ""
     try:
         v = estimate_variability(model, result.z, result.phi)
-        diag = np.diag(v.cov_theta)
-        if not (np.all(np.isfinite(v.cov_theta)) and np.all(diag > 0.0)):
-            why = "they do not inform every physical parameter on their own"
     except (np.linalg.LinAlgError, NoMeasuredLevels) as err:
         why = str(err) or "their covariance is singular"
-    if why:
         note = (
             f"scatter and discrepancy not estimated: the traces' own levels ({why}); "
             "the intervals are the noise-only model's and may be too narrow"

@@ -73,6 +73,11 @@ class Target(eqx.Module):
     def names(self) -> tuple[str, ...]:
         return tuple(p.name for p in self.params)
 
+    def log_posterior_batch(self, theta: Array) -> Array:
+        """:func:`log_posterior_batch` of this target (the sampler calls either target
+        the same way)."""
+        return log_posterior_batch(theta, self)
+
     @property
     def force_n(self) -> Array:
         return jnp.asarray(self.model.data.force_n)

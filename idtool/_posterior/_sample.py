@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from idtool._errors import IdtoolError
+from idtool._fit._variability import SD_PARAMS
 from idtool._model._benchmodel import BenchModel
 from idtool._model._noise import NOISE_MODELS
 from idtool._model._params import Param
@@ -52,7 +53,6 @@ from idtool._posterior._levels import (
 from idtool._posterior._likelihood import (
     Target,
     build_target,
-    log_posterior_batch,
     sampled_params,
 )
 from idtool._posterior._prior import Prior, default_prior, parse_priors, read_priors
@@ -67,9 +67,7 @@ LEVELS = "levels"  # the 'noise' of a chain sampled on the levels model
 @jax.jit
 def _batched(theta, target):
     """The log-posterior of a batch: the levels model's, or the traces' (Target)."""
-    if isinstance(target, LevelsTarget):
-        return target.log_posterior_batch(theta)
-    return log_posterior_batch(theta, target)
+    return target.log_posterior_batch(theta)
 
 
 class FitLike(Protocol):
@@ -239,7 +237,7 @@ def _resolve(fit, noise, priors, stored: dict | None):
     elif priors:
         raw = {n: p.to_dict() if isinstance(p, Prior) else p for n, p in priors.items()}
         overrides = parse_priors(raw, params, "priors")
-    sd_names = {"scatter_mu", "scatter_fr", "discrepancy_fr"}
+    sd_names = {p.name for p in SD_PARAMS}
     table = {p.name: SD_PRIOR if p.name in sd_names else default_prior(p) for p in params}
     table |= overrides
     if stored is not None:

@@ -102,16 +102,8 @@ def draws_from_posterior(
     """Prediction draws from an in-memory :class:`~idtool._posterior._sample.Posterior`
     (kept draws, thinned evenly to ``max_draws``); the sds from the posterior, else
     from the fit's ``sd_grids``."""
-    all_draws = post.draws()
-    n = next(iter(all_draws.values())).size
-    idx = _thin(n, max_draws)
-    values = {k: all_draws[k][idx] for k in model.physical_names}
-    sampled = {k: all_draws[k][idx] for k in SD_NAMES if k in all_draws}
-    sds, how = _sds(sampled, sd_grids, idx.size, seed)
-    note = f"posterior ({post.noise} noise, {idx.size} of {n} draws){how}"
-    if not post.diagnostics.converged:
-        note += "; the chain is NOT converged"
-    return Draws(model, values, "posterior", note, sds, seed)
+    unconverged = "" if post.diagnostics.converged else "; the chain is NOT converged"
+    return _chain_draws(post.draws(), post.noise, unconverged, model, max_draws, sd_grids, seed)
 
 
 def draws_from_stored(
@@ -122,14 +114,30 @@ def draws_from_stored(
     seed: int = 0,
 ) -> Draws:
     """Prediction draws from ``posterior.nc`` read back (:func:`load_posterior`)."""
-    n = post.n_draws
-    idx = _thin(n, max_draws)
-    values = {k: post.values[k][idx] for k in model.physical_names}
-    sampled = {k: post.values[k][idx] for k in SD_NAMES if k in post.values}
-    sds, how = _sds(sampled, sd_grids, idx.size, seed)
-    note = f"posterior ({post.meta['noise']} noise, {idx.size} of {n} draws){how}"
+    unconverged = ""
     if not post.meta["diagnostics"]["converged"]:
-        note += "; the chain is NOT converged, see sample.json"
+        unconverged = "; the chain is NOT converged, see sample.json"
+    noise = post.meta["noise"]
+    return _chain_draws(post.values, noise, unconverged, model, max_draws, sd_grids, seed)
+
+
+def _chain_draws(
+    chain: dict[str, np.ndarray],
+    noise: str,
+    unconverged: str,
+    model: BenchModel,
+    max_draws: int,
+    sd_grids: SdGrids | None,
+    seed: int,
+) -> Draws:
+    """Draws from a posterior's kept draws (flat, by name), thinned evenly to
+    ``max_draws``; the sds sampled, else from the fit's ``sd_grids``."""
+    n = next(iter(chain.values())).size
+    idx = _thin(n, max_draws)
+    values = {k: chain[k][idx] for k in model.physical_names}
+    sampled = {k: chain[k][idx] for k in SD_NAMES if k in chain}
+    sds, how = _sds(sampled, sd_grids, idx.size, seed)
+    note = f"posterior ({noise} noise, {idx.size} of {n} draws){how}{unconverged}"
     return Draws(model, values, "posterior", note, sds, seed)
 
 

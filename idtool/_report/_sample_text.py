@@ -76,30 +76,26 @@ def sample_report(
             "lie inside their 95% predictive band",
             f"    chi-square discrepancy: posterior predictive p = {check.p_value:.2f} "
             "(near 0: the model misses the levels even with its scatter and discrepancy)",
-            "[[Priors]]",
         ]
-        lines += [f"    {n:20s}{p.describe()}" for n, p in post.priors.items()]
-        lines += ["[[Warnings]]"]
-        lines += [f"    - {w}" for w in post.warnings] or ["    none"]
-        return "\n".join(lines)
-    lines += [
-        "[[Posterior predictive check]]",
-        f"    {100 * check.inside_fraction:.1f}% of the measured block means lie inside the "
-        "95% predictive band",
-        f"    lag-1 autocorrelation of the residuals: measured {check.lag1_measured:.3f}, "
-        f"replicated 95% [{check.lag1_replicated[0]:.3f}, {check.lag1_replicated[1]:.3f}], "
-        f"p = {check.lag1_p_value:.2f}",
-        "[[Priors]]",
-    ]
+    else:
+        lines += [
+            "[[Posterior predictive check]]",
+            f"    {100 * check.inside_fraction:.1f}% of the measured block means lie inside the "
+            "95% predictive band",
+            f"    lag-1 autocorrelation of the residuals: measured {check.lag1_measured:.3f}, "
+            f"replicated 95% [{check.lag1_replicated[0]:.3f}, {check.lag1_replicated[1]:.3f}], "
+            f"p = {check.lag1_p_value:.2f}",
+        ]
+    lines.append("[[Priors]]")
     lines += [f"    {n:20s}{p.describe()}" for n, p in post.priors.items()]
-    worst = min(shrink)
-    lines += [
-        "[[Nuisances]]",
-        f"    holding the per-trace nuisances at the fit's values would shrink the shared "
-        f"parameters' sds to {100 * worst:.0f}-{100 * max(shrink):.0f}% of their marginal "
-        "values (fit covariance), so they are integrated out",
-        "[[Warnings]]",
-    ]
+    if not isinstance(check, LevelsCheck):  # the levels model has no nuisances left
+        lines += [
+            "[[Nuisances]]",
+            f"    holding the per-trace nuisances at the fit's values would shrink the shared "
+            f"parameters' sds to {100 * min(shrink):.0f}-{100 * max(shrink):.0f}% of their "
+            "marginal values (fit covariance), so they are integrated out",
+        ]
+    lines.append("[[Warnings]]")
     lines += [f"    - {w}" for w in post.warnings] or ["    none"]
     return "\n".join(lines)
 
