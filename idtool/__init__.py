@@ -32,6 +32,10 @@ _LAZY = {
     "write_dataset": "idtool._data._write",
     "IdtoolError": "idtool._errors",
     "Estimate": "idtool._fit._fit",
+    "ACTUATORS": "idtool._model._actuator",
+    "AbstractActuator": "idtool._model._actuator",
+    "LagActuator": "idtool._model._actuator",
+    "SlopeActuator": "idtool._model._actuator",
     "BenchModel": "idtool._model._benchmodel",
     "bench_model": "idtool._model._benchmodel",
     "CycleAverage": "idtool._model._contact",
@@ -78,10 +82,12 @@ _LAZY = {
 }
 
 __all__ = [
+    "ACTUATORS",
     "COUPLINGS",
     "FRICTION_LAWS",
     "NOISE_MODELS",
     "SEED_FIGURES",
+    "AbstractActuator",
     "AbstractCoupling",
     "AbstractFrictionLaw",
     "AbstractNoise",
@@ -99,6 +105,7 @@ __all__ = [
     "Estimate",
     "Fit",
     "IdtoolError",
+    "LagActuator",
     "LuGre",
     "Param",
     "Posterior",
@@ -107,6 +114,7 @@ __all__ = [
     "Predictions",
     "Prior",
     "Rig",
+    "SlopeActuator",
     "Trace",
     "Transducer",
     "TransducerSteadyState",
@@ -154,6 +162,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
     from idtool._data._write import write_dataset
     from idtool._errors import IdtoolError
     from idtool._fit._fit import Estimate
+    from idtool._model._actuator import ACTUATORS, AbstractActuator, LagActuator, SlopeActuator
     from idtool._model._benchmodel import BenchModel, bench_model
     from idtool._model._contact import CycleAverage, cycle_average_curve, prescribed_cycle_average
     from idtool._model._coupling import (

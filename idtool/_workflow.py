@@ -284,6 +284,7 @@ def fit(
     profile: bool = False,
     mains_hz: float | None = None,
     variability: bool = True,
+    actuator: str = "auto",
 ) -> Fit:
     """Identify Kt, mu and the coupling from every trace of ``dataset`` at once.
 
@@ -305,6 +306,9 @@ def fit(
             physical model's discrepancy across operating points in every interval and
             band (default; estimated by REML, reported in ``fit.json``'s
             ``variability``). False gives the noise-only model, for comparison.
+        actuator: how the pull force follows its target, a name of
+            :data:`idtool.ACTUATORS` ("slope": constant slopes; "lag": a first-order lag
+            with a rate limit), or "auto" (default: both, the lower BIC kept).
     """
     if starts < 1:
         raise IdtoolError(f"starts = {starts}: give at least 1")
@@ -322,6 +326,7 @@ def fit(
         mains_hz=mains_hz,
         noise=noise,
         variability=variability,
+        actuator=actuator,
     )
     out = Fit(dataset, run.chosen, run)
     out.seconds = time.perf_counter() - started

@@ -25,6 +25,7 @@ def _run(args: argparse.Namespace) -> int:
         coupling=args.coupling,
         noise=args.noise,
         variability=args.variability == "on",
+        actuator=args.actuator,
         seed=args.seed,
         starts=args.starts,
         compare_laws=args.compare_laws,
@@ -41,7 +42,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from idtool import COUPLINGS, FRICTION_LAWS, NOISE_MODELS
+    from idtool import ACTUATORS, COUPLINGS, FRICTION_LAWS, NOISE_MODELS
     from idtool._model._noise import DEFAULT_NOISE
 
     fittable = [n for n in FRICTION_LAWS if FRICTION_LAWS.get(n).fit_params]
@@ -60,6 +61,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="power-limited",
         help="coupling law (default power-limited, the paper's finding); auto fits every "
         "coupling law and keeps the lowest BIC",
+    )
+    p.add_argument(
+        "--actuator",
+        choices=(*ACTUATORS.names(), "auto"),
+        default="auto",
+        help="how the force follows its target: slope (constant slopes), lag (first-order "
+        "lag with a rate limit); default auto fits both and keeps the lower BIC",
     )
     p.add_argument(
         "--noise",

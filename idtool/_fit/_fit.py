@@ -32,6 +32,7 @@ import numpy as np
 
 from idtool._data._blocks import FitData
 from idtool._fit._lm import LMResult, levenberg_marquardt
+from idtool._model._actuator import DEFAULT_ACTUATOR
 from idtool._model._benchmodel import BenchModel, bench_model
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._params import Param
@@ -233,9 +234,13 @@ def fit_model(
     seed: int = 0,
     n_starts: int = 8,
     noise: str = DEFAULT_NOISE,
+    actuator: str = DEFAULT_ACTUATOR,
+    start_from: FitResult | None = None,
 ) -> FitResult:
-    """Fit one law and coupling to prepared data; see the module docstring."""
-    model = bench_model(data, law, coupling, noise)
+    """Fit one law, coupling and actuator model to prepared data; see the module
+    docstring. ``start_from``: a fit of a model this one nests (the slope actuator for
+    the lag one): its optimum is the start, with no multi-start (same basin)."""
+    model = bench_model(data, law, coupling, noise, actuator)
     k = model.n_physical
     base = model.z0()
     everything = jnp.ones(base.size, bool)
@@ -246,6 +251,20 @@ def fit_model(
         count["steps"] += int(out.steps)
         count["jacobians"] += int(out.n_jacobians)
         return out
+
+    if start_from is not None:
+        # its parameters by name (same data: same nuisance centres and scales); the new
+        # ones at their start values, the AR(1) coefficient where it ended
+        prev = start_from.model.names
+        z = np.array(
+            [
+                start_from.z[prev.index(n)] if n in prev else base[i]
+                for i, n in enumerate(model.names)
+            ]
+        )
+        best = run(z, everything, start_from.phi, _POLISH_STEPS)
+        best, phi = _settle_phi(model, best, start_from.phi, run)
+        return _summarise(model, best, phi, start_from.optima, count)
 
     # 2. multi-start: from each quasi-random point of the physical parameters (the
     # nuisances at their data-driven start values) everything is fitted jointly. A step
@@ -274,8 +293,15 @@ def fit_model(
     if not bool(best.converged):
         best = run(best.z, everything, 0.0, _POLISH_STEPS)
 
-    # then (autoregressive noise) whitening until phi settles
-    phi = 0.0
+    best, phi = _settle_phi(model, best, 0.0, run)
+    return _summarise(model, best, phi, optima, count)
+
+
+def _settle_phi(model: BenchModel, best: LMResult, phi: float, run) -> tuple[LMResult, float]:
+    """Refit on AR(1)-whitened residuals (autoregressive noise) until phi settles, from
+    ``best`` fitted with ``phi``; the last fit and the phi it was fitted with."""
+    data = model.data
+    everything = jnp.ones(best.z.size, bool)
     for _ in range(3 if model.noise.autoregressive else 0):
         e = _unwhiten(np.asarray(best.residuals), phi, data)
         new_phi = model.noise.estimate_phi(e, data.first)
@@ -285,7 +311,7 @@ def fit_model(
             break
         phi = new_phi
         best = run(best.z, everything, phi, _POLISH_STEPS)
-    return _summarise(model, best, phi, optima, count)
+    return best, phi
 
 
 def _values_and_jacobian(

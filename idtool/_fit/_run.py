@@ -6,7 +6,9 @@ request): every candidate is fitted by :func:`idtool._fit._fit.fit_model` and ra
 (:mod:`idtool._fit._intervals`). BIC decides because the candidates are nested and the data are
 many (thousands of blocks): AIC's penalty of 2 per parameter would let the richer law
 win on noise. With a single normal load the power limit cannot show, so ``auto`` keeps
-the constant coupling and says so.
+the constant coupling and says so. The actuator model is chosen the same way by default
+(``actuator="auto"``: the slope model and the lag model that nests it,
+:mod:`idtool._model._actuator`).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from idtool._data._mains import resolve_mains
 from idtool._fit._fit import FitResult, fit_model
 from idtool._fit._intervals import check_intervals, refit_with_fixed
 from idtool._fit._variability import with_variability
+from idtool._model._actuator import ACTUATORS
 from idtool._model._coupling import COUPLINGS
 from idtool._model._laws import FRICTION_LAWS
 from idtool._model._noise import DEFAULT_NOISE
@@ -55,8 +58,8 @@ class FitRun:
         return sorted(self.candidates.items(), key=lambda kv: kv[1].bic)
 
 
-def _key(law: str, coupling: str) -> str:
-    return f"{law}/{coupling}"
+def _key(law: str, coupling: str, actuator: str) -> str:
+    return f"{law}/{coupling}/{actuator}"
 
 
 def fit_dataset(
@@ -70,15 +73,17 @@ def fit_dataset(
     mains_hz: float | None = None,
     noise: str = DEFAULT_NOISE,
     variability: bool = True,
+    actuator: str = "auto",
 ) -> FitRun:
-    """Fit ``dataset``; ``law``, ``coupling`` and ``noise`` by registered name
-    (:data:`FRICTION_LAWS`, :data:`COUPLINGS`, :data:`NOISE_MODELS`); ``coupling="auto"``
-    fits every registered coupling law, ``compare_laws`` every friction law with a
-    contact stiffness. ``mains_hz`` [Hz]: the block means span whole periods of it; None
-    takes ``rig.mains_frequency_hz``, else the hum found in the traces, else 50 Hz
-    (:func:`idtool._data._mains.resolve_mains`). ``variability`` (default): the chosen
-    fit's intervals carry pull-to-pull scatter and model discrepancy
-    (:mod:`idtool._fit._variability`); False gives the noise-only model."""
+    """Fit ``dataset``; ``law``, ``coupling``, ``noise`` and ``actuator`` by registered
+    name (:data:`FRICTION_LAWS`, :data:`COUPLINGS`, :data:`NOISE_MODELS`,
+    :data:`ACTUATORS`); ``coupling="auto"`` fits every registered coupling law,
+    ``actuator="auto"`` (default) every actuator model, ``compare_laws`` every friction
+    law with a contact stiffness; BIC chooses. ``mains_hz`` [Hz]: the block means span
+    whole periods of it; None takes ``rig.mains_frequency_hz``, else the hum found in
+    the traces, else 50 Hz (:func:`idtool._data._mains.resolve_mains`). ``variability``
+    (default): the chosen fit's intervals carry pull-to-pull scatter and model
+    discrepancy (:mod:`idtool._fit._variability`); False gives the noise-only model."""
     mains, mains_source, mains_warnings = resolve_mains(dataset, mains_hz)
     data = prepare_fit_data(dataset, mains_hz=mains, periods_per_block=2, mains_source=mains_source)
     mains_warnings += data.notes
@@ -89,13 +94,18 @@ def fit_dataset(
     single_load = np.unique(data.normal_load_n).size == 1
     if coupling == "auto" and single_load:
         couplings = ("constant",)
-    candidates = {
-        _key(lw, cp): fit_model(
-            data, law=lw, coupling=cp, seed=seed, n_starts=n_starts, noise=noise
-        )
-        for lw in laws
-        for cp in couplings
-    }
+    actuators = ACTUATORS.names() if actuator == "auto" else (ACTUATORS.get(actuator).name,)
+    candidates = {}
+    for lw in laws:
+        for cp in couplings:
+            # the simplest actuator model first (multi-start), each richer one nested in
+            # it from its optimum (ACTUATORS is registered simplest first)
+            nested = None
+            for ac in actuators:
+                candidates[_key(lw, cp, ac)] = fit = fit_model(
+                    data, lw, cp, seed, n_starts, noise, actuator=ac, start_from=nested
+                )
+                nested = nested or fit
     ranked = sorted(candidates.items(), key=lambda kv: kv[1].bic)
     best_key, best = ranked[0]
     best = candidates[best_key] = check_intervals(best)
@@ -107,16 +117,16 @@ def fit_dataset(
         )
     if len(ranked) == 1:
         reason = f"{best_key} as requested"
-        if coupling == "auto" and single_load:
-            reason = (
-                f"{best_key}: all traces share one normal load, so the power-limited "
-                "coupling cannot be told apart from the constant one; the simpler is kept"
-            )
     else:
         second_key, second = ranked[1]
         reason = (
             f"{best_key}: BIC lower by {second.bic - best.bic:.1f} and AIC by "
             f"{second.aic - best.aic:.1f} than {second_key}"
+        )
+    if coupling == "auto" and single_load:
+        reason += (
+            "; all traces share one normal load, so the power-limited coupling cannot be "
+            "told apart from the constant one: the simpler is kept"
         )
     profiles = {}
     if profile:

@@ -132,7 +132,13 @@ def load_stored_fit(folder: str | Path) -> StoredFit:
             f"{doc_path}: the fit averaged over blocks of {periods_used} mains periods, this "
             f"idtool makes blocks of {data.periods_per_block} whole periods; run 'idtool fit' again"
         )
-    model = bench_model(data, doc["law"], doc["coupling"], doc["noise"].get("name", "ar1"))
+    model = bench_model(
+        data,
+        doc["law"],
+        doc["coupling"],
+        doc["noise"].get("name", "ar1"),
+        doc.get("actuator", {}).get("name", "slope"),  # fits before the lag model: slope
+    )
     if tuple(state["names"]) != model.names:
         raise IdtoolError(f"{state_path}: parameters do not match the model; fit again")
     return StoredFit(

@@ -140,7 +140,8 @@ def _at_level_s(model: BenchModel, z: np.ndarray, levels: np.ndarray) -> np.ndar
     end = np.asarray(d.on_end_s) + np.asarray(v["delay_off_s"])
     with np.errstate(invalid="ignore"):
         length = np.where(np.isfinite(start) & np.isfinite(end), end - start, -np.inf)
-    return length - (off - on) / float(v["slope_n_s"])
+    settle = np.asarray(model.actuator.from_values(v).settle_time_s(off - on))
+    return length - settle
 
 
 def _linearise(model: BenchModel, z: np.ndarray, phi: float):

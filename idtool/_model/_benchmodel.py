@@ -2,16 +2,18 @@
 
 A :class:`BenchModel` is an ``eqx.Module``: the block-averaged traces
 (:class:`~idtool._data._blocks.FitData`) are its leaves, so one compiled program serves
-every dataset of the same shape; the friction law, the coupling law and the noise model
-are static types, each declaring its own parameters (``fit_params``, ``params``) and
-registered by name (:data:`FRICTION_LAWS`, :data:`COUPLINGS`, :data:`NOISE_MODELS`).
+every dataset of the same shape; the friction law, the coupling law, the actuator model
+and the noise model are static types, each declaring its own parameters (``fit_params``,
+``params``) and registered by name (:data:`FRICTION_LAWS`, :data:`COUPLINGS`,
+:data:`ACTUATORS`, :data:`NOISE_MODELS`).
 
 Parameters, in the order of the internal vector ``z``:
 
 * shared physical ones: the law's (``Kt``; LuGre adds ``static_ratio`` and
   ``stribeck_velocity_m_s``), ``mu``, the coupling's (``coupling_gain``, and
   ``power_load_n`` [N] for the power-limited law);
-* shared bench ones: the actuator-limited ``slope_n_s`` and ``startup_slope_n_s`` [N/s];
+* shared bench ones: the actuator model's, ``slope_n_s`` and ``startup_slope_n_s``
+  [N/s] (the lag model adds ``time_constant_s`` [s], :mod:`idtool._model._actuator`);
 * per trace (:data:`TRACE_GROUPS`): the load-cell offset [N] (it drifts between pulls;
   the baseline before each pull measures it), the pull start [s], and the lag of the
   horn behind the logged ON flag at switch-on and at switch-off [s].
@@ -33,15 +35,14 @@ from jaxtyping import Array, ArrayLike, Float
 
 from idtool._data._blocks import FitData, start_values
 from idtool._fit._lm import ColouredJacobian, normal_equations
-from idtool._model._bench import TraceTiming, mean_force_n, on_friction_ratio
+from idtool._model._actuator import ACTUATORS, DEFAULT_ACTUATOR, AbstractActuator
+from idtool._model._bench import TraceTiming, on_friction_ratio
 from idtool._model._coupling import COUPLINGS, AbstractCoupling
 from idtool._model._laws import FRICTION_LAWS, MU, AbstractFrictionLaw
 from idtool._model._noise import DEFAULT_NOISE, NOISE_MODELS, AbstractNoise, whiten
 from idtool._model._params import Param
 
-__all__ = ["BENCH_PARAMS", "CORNER_N", "TRACE_GROUPS", "BenchModel", "bench_model"]
-
-CORNER_N = 0.5  # rounding of the trace's corners [N]; fixed, not identifiable
+__all__ = ["TRACE_GROUPS", "BenchModel", "bench_model"]
 
 # Per-trace nuisances: name, unit, internal scale. The horn's lag behind the logged flag
 # differs at switch-on and switch-off (each is its own relay and ramp-up), and a single
@@ -53,14 +54,10 @@ TRACE_GROUPS = (
     ("delay_off_s", "s", 0.01),
 )
 
-BENCH_PARAMS = (
-    Param("slope_n_s", "N/s", "log", 1.0, 1e5, start=100.0, description="actuator slope"),
-    Param("startup_slope_n_s", "N/s", "log", 1.0, 1e5, start=100.0, description="start-up slope"),
-)
-
 
 class BenchModel(eqx.Module):
-    """The model of one dataset for one friction law, coupling law and noise model.
+    """The model of one dataset for one friction law, coupling law, actuator model and
+    noise model.
 
     Build it with :func:`bench_model`. Pure and jittable: pass it to ``jax.jit``-ed
     functions as an argument.
@@ -69,16 +66,17 @@ class BenchModel(eqx.Module):
     data: FitData
     nuisance_centre: Float[Array, "groups traces"]  # data-driven start of each nuisance
     start_z: Float[Array, " shared"]  # data-driven internal start of the shared ones
-    level_structure: ColouredJacobian  # sparsity in (OFF, ON levels, z[k:]): 8 colours
+    level_structure: ColouredJacobian  # sparsity in (OFF, ON levels, z[k:])
     law: type[AbstractFrictionLaw] = eqx.field(static=True)
     coupling: type[AbstractCoupling] = eqx.field(static=True)
+    actuator: type[AbstractActuator] = eqx.field(static=True)
     noise: AbstractNoise = eqx.field(static=True)
 
     # ------------------------------------------------------------------ parameters
     @property
     def shared_params(self) -> tuple[Param, ...]:
         """Shared parameters, physical first (module docstring)."""
-        return _shared_params(self.law, self.coupling)
+        return _shared_params(self.law, self.coupling, self.actuator)
 
     @property
     def params(self) -> tuple[Param, ...]:
@@ -196,15 +194,9 @@ class BenchModel(eqx.Module):
             on_end_s=per_block(_add_trailing(d.on_end_s, v["delay_off_s"], extra)),
         )
         t = jnp.asarray(d.sub_time_s).reshape(d.sub_time_s.shape + (1,) * extra)
-        force = mean_force_n(
-            t,
-            per_block(off_n),
-            per_block(on_n),
-            timing,
-            v["slope_n_s"],
-            v["startup_slope_n_s"],
-            per_block(v["offset_n"]),
-            CORNER_N,
+        actuator = self.actuator.from_values(v)
+        force = actuator.force_n(
+            t, per_block(off_n), per_block(on_n), timing, per_block(v["offset_n"])
         )
         return force.mean(axis=1)
 
@@ -237,10 +229,10 @@ class BenchModel(eqx.Module):
 
         The physical parameters reach the traces only through the per-trace OFF and ON
         levels, so the Jacobian is taken in the bench model's inputs ``u = (OFF, ON,
-        z[k:])`` with one JVP per colour of :attr:`level_structure` (8; the contact model
-        stays out of them) and mapped back by the chain rule, ``J = J_u T`` with
-        ``T = du/dz``: the levels' small Jacobian in the physical parameters, the
-        identity for the rest.
+        z[k:])`` with one JVP per colour of :attr:`level_structure` (8, 9 with the lag
+        actuator; the contact model stays out of them) and mapped back by the chain
+        rule, ``J = J_u T`` with ``T = du/dz``: the levels' small Jacobian in the
+        physical parameters, the identity for the rest.
         """
         k, m = self.n_physical, self.data.n_traces
         z = jnp.asarray(z)
@@ -264,9 +256,11 @@ class BenchModel(eqx.Module):
 
 
 def _shared_params(
-    law: type[AbstractFrictionLaw], coupling: type[AbstractCoupling]
+    law: type[AbstractFrictionLaw],
+    coupling: type[AbstractCoupling],
+    actuator: type[AbstractActuator],
 ) -> tuple[Param, ...]:
-    return (*law.fit_params, MU, *coupling.fit_params, *BENCH_PARAMS)
+    return (*law.fit_params, MU, *coupling.fit_params, *actuator.fit_params)
 
 
 def _add_trailing(per_trace: ArrayLike, shift: ArrayLike, extra: int) -> Array:
@@ -282,8 +276,10 @@ def bench_model(
     law: str | type[AbstractFrictionLaw] = "dahl",
     coupling: str | type[AbstractCoupling] = "power-limited",
     noise: str | type[AbstractNoise] = DEFAULT_NOISE,
+    actuator: str | type[AbstractActuator] = DEFAULT_ACTUATOR,
 ) -> BenchModel:
-    """The :class:`BenchModel` of prepared ``data``; laws by registered name or class.
+    """The :class:`BenchModel` of prepared ``data``; laws and models by registered name
+    or class.
 
     The per-trace nuisances and ``mu`` and the slopes start from values read off the
     traces (:func:`idtool._data._blocks.start_values`); the other shared parameters
@@ -292,8 +288,9 @@ def bench_model(
     law_cls = FRICTION_LAWS.get(law)
     coupling_cls = COUPLINGS.get(coupling)
     noise_cls = NOISE_MODELS.get(noise)
+    actuator_cls = ACTUATORS.get(actuator)
     s = start_values(data)
-    shared = _shared_params(law_cls, coupling_cls)
+    shared = _shared_params(law_cls, coupling_cls, actuator_cls)
     guess = {
         "mu": s.friction_coefficient,
         "slope_n_s": s.slope_n_s,
@@ -319,5 +316,6 @@ def bench_model(
         level_structure=ColouredJacobian.from_groups(groups, data.block_trace),
         law=law_cls,
         coupling=coupling_cls,
+        actuator=actuator_cls,
         noise=noise_cls(),
     )

@@ -1,7 +1,7 @@
 """The log-posterior the sampler explores (issue 5): noise models, nuisances, priors.
 
 What is sampled: the shared parameters of the fit (the physical ones and the actuator
-slopes, on the fit's internal scale) and the noise parameters. The 4 nuisances of every
+model's, on the fit's internal scale) and the noise parameters. The 4 nuisances of every
 trace (load-cell offset, pull start, horn lags) are *integrated out*, not held fixed:
 holding them at the fit's values narrows the posterior of mu to 30% of its marginal
 width on the example and the others to 55-65% (the fit's covariance shows it; see
@@ -174,7 +174,7 @@ def predict_blocks_batch(
     model = target.model
     off, on, _ = jax.vmap(model.levels)(v)  # (walkers, traces)
     vals = dict(target.nuisances if nuisances is None else nuisances)
-    vals |= {"slope_n_s": v["slope_n_s"], "startup_slope_n_s": v["startup_slope_n_s"]}
+    vals |= {p.name: v[p.name] for p in model.actuator.fit_params}
     return model.block_means(off.T, on.T, vals).T
 
 

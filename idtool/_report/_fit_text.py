@@ -78,6 +78,10 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
         "traces": traces,
         "law": law,
         "coupling": coupling,
+        "actuator": {
+            "name": r.model.actuator.name,
+            "parameters": [p.name for p in r.model.actuator.fit_params],
+        },
         "aic": r.aic,
         "bic": r.bic,
         "loglik": r.loglik,
@@ -180,7 +184,8 @@ def fit_report(run: FitRun) -> str:
         "[[Fit]]",
         f"    dataset      {d.name} (sha256 {d.sha256[:12]}...), {d.n_traces} traces, "
         f"{d.n_blocks} block means of {d.block_size} samples",
-        f"    model        {r.model.law.name} friction, {r.model.coupling.name} coupling",
+        f"    model        {r.model.law.name} friction, {r.model.coupling.name} coupling, "
+        f"{r.model.actuator.name} actuator",
         f"    choice       {run.reason}",
         f"    noise        {r.model.noise.description} ({r.model.noise.name}), phi = {r.phi:.3f}, "
         f"innovation sigma = {r.sigma_n:.3g} N",
