@@ -94,6 +94,12 @@ class Fit:
         return self._state.levels
 
     @property
+    def conditioning(self):
+        """What predictions condition the discrepancy on (the traces' own friction
+        ratios), or None (``variability=False``)."""
+        return self._state.conditioning
+
+    @property
     def estimates(self) -> dict[str, Estimate]:
         if isinstance(self._state, FitResult):
             return self._state.estimates
@@ -185,16 +191,13 @@ class Fit:
     def draws(self, max_draws: int = 2000, seed: int = 0) -> Draws:
         """Draws of the physical parameters: the posterior's if sampled (in memory or
         ``posterior.nc`` beside a loaded fit), else Gaussian on the fit's covariance."""
+        grids, cond = self._state.sd_grids, self._state.conditioning
         if self.posterior is not None:
-            return draws_from_posterior(
-                self.posterior, self.model, max_draws, self._state.sd_grids, seed
-            )
+            return draws_from_posterior(self.posterior, self.model, max_draws, grids, seed, cond)
         if self.folder is not None and (self.folder / POSTERIOR_FILE).is_file():
             stored = load_posterior(self.folder / POSTERIOR_FILE)
-            return draws_from_stored(stored, self.model, max_draws, self._state.sd_grids, seed)
-        return draws_from_covariance(
-            self.model, self.z, self.cov_z, max_draws, seed, self._state.sd_grids
-        )
+            return draws_from_stored(stored, self.model, max_draws, grids, seed, cond)
+        return draws_from_covariance(self.model, self.z, self.cov_z, max_draws, seed, grids, cond)
 
     # ------------------------------------------------------------------ predictions
     def predict(

@@ -27,7 +27,7 @@ TIMING = TraceTiming(startup_s=0.5, on_start_s=4.0, on_end_s=5.2)  # ends before
 def brute_force_n(t_end_s, tau_s, rate_n_s, startup_rate_n_s, dt_s=1e-5):
     """Forward-Euler integration of ``dF/dt = clip((target - F) / tau, -rate, rate)``
     with the target of :data:`TIMING`; returns (times, forces) every 1 ms."""
-    n = int(round(t_end_s / dt_s))
+    n = round(t_end_s / dt_s)
     t = np.arange(n + 1) * dt_s
     target = np.where(t < TIMING.startup_s, 0.0, OFF_N)
     inside = (t >= TIMING.on_start_s) & (t < TIMING.on_end_s)
@@ -41,7 +41,7 @@ def brute_force_n(t_end_s, tau_s, rate_n_s, startup_rate_n_s, dt_s=1e-5):
 
     _, f = jax.lax.scan(euler, 0.0, (jnp.asarray(target[:-1]), jnp.asarray(rate[:-1])))
     f = np.concatenate([[0.0], np.asarray(f)])
-    every = int(round(1e-3 / dt_s))
+    every = round(1e-3 / dt_s)
     return t[::every], f[::every]
 
 

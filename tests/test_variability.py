@@ -12,6 +12,7 @@ import pytest
 
 import idtool
 from idtool._fit import _variability as V
+from idtool._fit._discrepancy import Conditioning, correlation, discrepancy_moments
 from idtool._predict._predict import Draws, with_variability
 
 
@@ -82,16 +83,17 @@ def test_bands_carry_discrepancy_and_scatter():
     rng = np.random.default_rng(1)
     fr = 0.3 + 0.001 * rng.standard_normal((4000, 1))
     base = Draws(None, {}, "fit covariance", "")  # type: ignore[arg-type]
-    mean, new = with_variability(fr, base)
+    x = np.array([[np.log(450.0), 0.5, np.log(0.025)]])  # no conditioning: any point
+    mean, new = with_variability(fr, base, x)
     assert mean is fr and new is fr
     sds = {"discrepancy_fr": np.zeros(4000), "scatter_fr": np.full(4000, 0.05)}
-    mean, new = with_variability(fr, dataclasses.replace(base, sds=sds))
+    mean, new = with_variability(fr, dataclasses.replace(base, sds=sds), x)
     assert np.std(mean) == pytest.approx(0.001, rel=0.05)
     assert np.std(np.log(new)) == pytest.approx(0.05, rel=0.05)
     sds = {"discrepancy_fr": np.full(4000, 0.05), "scatter_fr": np.zeros(4000)}
-    mean, _ = with_variability(fr, dataclasses.replace(base, sds=sds))
+    mean, _ = with_variability(fr, dataclasses.replace(base, sds=sds), x)
     assert np.std(np.log(mean)) == pytest.approx(0.05, rel=0.05)
-    mean, new = with_variability(np.full((4000, 1), 0.99), dataclasses.replace(base, sds=sds))
+    mean, new = with_variability(np.full((4000, 1), 0.99), dataclasses.replace(base, sds=sds), x)
     assert mean.max() <= 1.0 and new.max() <= 1.0
 
 
@@ -130,3 +132,32 @@ def test_levels_posterior_samples_the_sds(example_fits):
     np.testing.assert_array_equal(post.chain, again.chain)
     draws = post.draws()
     assert np.all(draws["discrepancy_fr"] > 0)
+
+
+def test_discrepancy_conditioning_is_gaussian_conditioning():
+    """The kriging moments against conditioning the joint Gaussian of (d(x*), y) by
+    brute force; at a measured point the band follows the data, far away it reverts to
+    the unconditional sd."""
+    rng = np.random.default_rng(3)
+    scales = np.array([0.45, 0.1, 0.1])
+    x = np.array([[np.log(n), a, np.log(0.025)] for n in (270, 450, 670) for a in (0.5, 0.7)])
+    v = np.diag(rng.uniform(1e-6, 4e-6, x.shape[0]))  # the free FRs' noise (log)
+    y, g = rng.normal(0, 0.05, x.shape[0]), np.zeros(x.shape[0])
+    sd_d, sd_c = 0.08, 0.01
+    cond = Conditioning(x, y, v, scales)
+    weights, s_inv = cond.weights(g[None], np.array([sd_d]), np.array([sd_c]))
+    x_new = np.array(
+        [[np.log(360.0), 0.6, np.log(0.025)], x[3], [np.log(3000.0), 0.6, np.log(0.025)]]
+    )
+    mean, var = discrepancy_moments(x_new, x, scales, weights[0], s_inv[0], sd_d)
+    # brute force: the joint covariance of (d(x_new), y), conditioned
+    k_all = np.asarray(correlation(np.vstack([x_new, x]), np.vstack([x_new, x]), scales))
+    joint = sd_d**2 * k_all
+    joint[3:, 3:] += v + sd_c**2 * np.eye(x.shape[0])
+    a, b = joint[:3, 3:], joint[3:, 3:]
+    np.testing.assert_allclose(mean, a @ np.linalg.solve(b, y - g), rtol=1e-10)
+    np.testing.assert_allclose(var, np.diag(joint[:3, :3] - a @ np.linalg.solve(b, a.T)), rtol=1e-8)
+    # measured point: about the data's own spread (noise and scatter), not sd_d
+    assert var[1] < (2 * sd_c) ** 2
+    # 3000 N is 3.3 length scales outside the design: unconditional to 0.1%
+    assert var[2] == pytest.approx(sd_d**2, rel=1e-3)

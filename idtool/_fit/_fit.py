@@ -110,6 +110,15 @@ class FitResult:
         return self.variability.free, dict(self.variability.sds)
 
     @property
+    def conditioning(self):
+        """What predictions condition the discrepancy on (the traces' own friction
+        ratios, :mod:`idtool._fit._discrepancy`), or None when the levels model is off."""
+        from idtool._fit._variability import discrepancy_conditioning
+
+        levels = self.levels
+        return None if levels is None else discrepancy_conditioning(self.model, levels[0])
+
+    @property
     def n_data(self) -> int:
         return self.model.data.n_blocks
 

@@ -16,8 +16,9 @@ import numpy as np
 from idtool._data._blocks import prepare_fit_data
 from idtool._data._dataset import Dataset, load_dataset
 from idtool._errors import IdtoolError
+from idtool._fit._discrepancy import Conditioning
 from idtool._fit._fit import Estimate, FitResult
-from idtool._fit._variability import FreeLevels
+from idtool._fit._variability import FreeLevels, discrepancy_conditioning
 from idtool._model._benchmodel import BenchModel, bench_model
 
 __all__ = ["STATE_FILE", "StoredFit", "load_stored_fit", "save_fit_state"]
@@ -66,6 +67,14 @@ class StoredFit:
     sd_grids: dict[str, tuple[np.ndarray, np.ndarray]] = dataclasses.field(default_factory=dict)
     # the free levels and the sds (estimate, ci95 lo, hi), or None when off
     levels: tuple[FreeLevels, dict[str, tuple[float, float, float]]] | None = None
+
+    @property
+    def conditioning(self) -> Conditioning | None:
+        """What predictions condition the discrepancy on, or None when the levels model
+        is off (:mod:`idtool._fit._discrepancy`)."""
+        if self.levels is None:
+            return None
+        return discrepancy_conditioning(self.model, self.levels[0])
 
     def estimates(self) -> dict[str, Estimate]:
         """Every shared parameter's estimate as ``fit.json`` records it."""

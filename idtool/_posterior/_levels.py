@@ -51,7 +51,7 @@ class LevelsTarget(eqx.Module):
     cov_y: Array
     rows: Array  # rows of (log OFF, log FR) per trace that y holds
     kinds: Array  # (n, 2) one-hot: an OFF row, an FR row
-    same_op: Array  # (n, n) 1 where two FR rows share an operating point
+    disc_corr: Array  # (n, n) the discrepancy's correlation between the FR rows
     priors: tuple[Prior, ...] = eqx.field(static=True)
     sd_names: tuple[str, ...] = eqx.field(static=True)
 
@@ -92,7 +92,7 @@ def _mean_and_cholesky(v: dict, target: LevelsTarget) -> tuple[Array, Array]:
     zero = jnp.zeros(g.shape[0])
     tau2 = [v.get(p.name, zero) ** 2 for p in SD_PARAMS]
     diag = target.kinds[:, 0] * tau2[0][:, None] + target.kinds[:, 1] * tau2[1][:, None]
-    c = target.cov_y + jax.vmap(jnp.diag)(diag) + tau2[2][:, None, None] * target.same_op[None]
+    c = target.cov_y + jax.vmap(jnp.diag)(diag) + tau2[2][:, None, None] * target.disc_corr[None]
     return g, jnp.linalg.cholesky(c)
 
 
@@ -113,7 +113,7 @@ def build_levels_target(
         cov_y=jnp.asarray(free.cov_y),
         rows=jnp.asarray(design.rows),
         kinds=jnp.asarray(design.kinds),
-        same_op=jnp.asarray(design.same_op),
+        disc_corr=jnp.asarray(design.disc_corr),
         priors=tuple(priors[n] for n in names),
         sd_names=tuple(n for n in names if n in {p.name for p in SD_PARAMS}),
     )

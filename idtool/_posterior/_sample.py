@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from idtool._errors import IdtoolError
+from idtool._fit._discrepancy import Conditioning
 from idtool._fit._variability import SD_PARAMS
 from idtool._model._benchmodel import BenchModel
 from idtool._model._noise import NOISE_MODELS
@@ -85,6 +86,8 @@ class FitLike(Protocol):
     def sigma_n(self) -> float: ...
     @property
     def levels(self) -> Any: ...
+    @property
+    def conditioning(self) -> Conditioning | None: ...
 
 
 class LogPosterior:
@@ -140,6 +143,7 @@ class Posterior:
     z_lin: np.ndarray  # BenchModel vector where the nuisances are linearised
     warnings: tuple[str, ...] = ()
     model: BenchModel | None = None  # the model sampled (for predictions)
+    conditioning: Conditioning | None = None  # the data the discrepancy is conditioned on
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -395,6 +399,7 @@ def sample_posterior(
         z_lin=np.asarray(z_lin),
         warnings=warnings,
         model=fit.model,
+        conditioning=fit.conditioning,
     )
 
 

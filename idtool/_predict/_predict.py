@@ -18,6 +18,7 @@ fit's internal scale with the fit's covariance (say so: it is a local approximat
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from pathlib import Path
 
@@ -26,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from idtool._data._blocks import FitData
+from idtool._fit._discrepancy import Conditioning, discrepancy_moments, operating_coordinates
 from idtool._fit._store import StoredFit
 from idtool._model._benchmodel import BenchModel
 from idtool._posterior._sample import Posterior
@@ -56,7 +58,9 @@ class Draws:
     ``sds`` holds, per draw, the levels model's sds (``discrepancy_fr``, ``scatter_fr``;
     :mod:`idtool._fit._variability`) when the fit has them: the friction-ratio band then
     carries the operating-point discrepancy and the new-trace band the pull-to-pull
-    scatter too. ``seed`` seeds those extra draws.
+    scatter too. ``conditioning``: the traces' own friction ratios, on which the
+    discrepancy is conditioned (:mod:`idtool._fit._discrepancy`); without it the
+    discrepancy is unconditional everywhere. ``seed`` seeds those extra draws.
     """
 
     model: BenchModel
@@ -65,10 +69,37 @@ class Draws:
     note: str
     sds: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     seed: int = 0
+    conditioning: Conditioning | None = None
 
     @property
     def n(self) -> int:
         return int(next(iter(self.values.values())).size)
+
+    @functools.cached_property
+    def kriging(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per draw, what the discrepancy's conditional moments need (arguments of
+        :func:`~idtool._fit._discrepancy.discrepancy_moments` after ``x_new``): the
+        rows' coordinates and length scales, ``S^-1 (y - g)``, ``S^-1`` and the sd; all
+        zero but the sd without conditioning (the unconditional discrepancy)."""
+        n = next(iter(self.sds.values())).size if self.sds else self.n
+        zero = np.zeros(n)
+        sd = self.sds.get("discrepancy_fr", zero)
+        c = self.conditioning
+        if c is None or not self.sds:
+            return np.zeros((1, 3)), np.ones(3), np.zeros((n, 1)), np.zeros((n, 1, 1)), sd
+        v = {k: jnp.asarray(x) for k, x in self.values.items()}
+        load, alpha, speed = (jnp.asarray(r) for r in c.rows)
+        g = np.log(np.asarray(_fr_draws(self.model, v, load, alpha, speed)))
+        weights, s_inv = c.weights(g, sd, self.sds.get("scatter_fr", zero))
+        return c.x, c.scales, weights, s_inv, sd
+
+    def discrepancy(self, x_new: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Mean and variance of the discrepancy (log FR) at operating points ``x_new``
+        (p, 3) per draw, given the data: (draws, p) each."""
+        x_rows, scales, weights, s_inv, sd = self.kriging
+        one = jax.vmap(discrepancy_moments, in_axes=(None, None, None, 0, 0, 0))
+        mean, var = one(jnp.asarray(x_new), x_rows, scales, weights, s_inv, sd)
+        return np.asarray(mean), np.asarray(var)
 
 
 def _thin(n: int, max_draws: int) -> np.ndarray:
@@ -98,12 +129,16 @@ def draws_from_posterior(
     max_draws: int = 2000,
     sd_grids: SdGrids | None = None,
     seed: int = 0,
+    conditioning: Conditioning | None = None,
 ) -> Draws:
     """Prediction draws from an in-memory :class:`~idtool._posterior._sample.Posterior`
     (kept draws, thinned evenly to ``max_draws``); the sds from the posterior, else
-    from the fit's ``sd_grids``."""
+    from the fit's ``sd_grids``; the discrepancy conditioned on ``conditioning`` (default:
+    the posterior's own)."""
     unconverged = "" if post.diagnostics.converged else "; the chain is NOT converged"
-    return _chain_draws(post.draws(), post.noise, unconverged, model, max_draws, sd_grids, seed)
+    cond = conditioning or post.conditioning
+    chain = post.draws()
+    return _chain_draws(chain, post.noise, unconverged, model, max_draws, sd_grids, seed, cond)
 
 
 def draws_from_stored(
@@ -112,13 +147,16 @@ def draws_from_stored(
     max_draws: int = 2000,
     sd_grids: SdGrids | None = None,
     seed: int = 0,
+    conditioning: Conditioning | None = None,
 ) -> Draws:
     """Prediction draws from ``posterior.nc`` read back (:func:`load_posterior`)."""
     unconverged = ""
     if not post.meta["diagnostics"]["converged"]:
         unconverged = "; the chain is NOT converged, see sample.json"
     noise = post.meta["noise"]
-    return _chain_draws(post.values, noise, unconverged, model, max_draws, sd_grids, seed)
+    return _chain_draws(
+        post.values, noise, unconverged, model, max_draws, sd_grids, seed, conditioning
+    )
 
 
 def _chain_draws(
@@ -129,6 +167,7 @@ def _chain_draws(
     max_draws: int,
     sd_grids: SdGrids | None,
     seed: int,
+    conditioning: Conditioning | None,
 ) -> Draws:
     """Draws from a posterior's kept draws (flat, by name), thinned evenly to
     ``max_draws``; the sds sampled, else from the fit's ``sd_grids``."""
@@ -137,8 +176,17 @@ def _chain_draws(
     values = {k: chain[k][idx] for k in model.physical_names}
     sampled = {k: chain[k][idx] for k in SD_NAMES if k in chain}
     sds, how = _sds(sampled, sd_grids, idx.size, seed)
-    note = f"posterior ({noise} noise, {idx.size} of {n} draws){how}{unconverged}"
-    return Draws(model, values, "posterior", note, sds, seed)
+    note = f"posterior ({noise} noise, {idx.size} of {n} draws){how}"
+    note += _conditioned(sds, conditioning) + unconverged
+    return Draws(model, values, "posterior", note, sds, seed, conditioning)
+
+
+def _conditioned(sds: dict, conditioning: Conditioning | None) -> str:
+    if not sds:
+        return ""
+    if conditioning is None:
+        return "; the discrepancy unconditional (not conditioned on the traces)"
+    return "; the discrepancy conditioned on the traces' own friction ratios"
 
 
 def draws_from_covariance(
@@ -148,10 +196,11 @@ def draws_from_covariance(
     max_draws: int = 2000,
     seed: int = 0,
     sd_grids: SdGrids | None = None,
+    conditioning: Conditioning | None = None,
 ) -> Draws:
     """Gaussian draws on the internal scale from a fit's covariance: a local
     approximation of the posterior, mapped through the transforms; the sds from the
-    fit's REML grids ``sd_grids``."""
+    fit's REML grids ``sd_grids``; the discrepancy conditioned on ``conditioning``."""
     k = model.n_physical
     rng = np.random.default_rng(seed)
     draws = rng.multivariate_normal(z[:k], cov_z[:k, :k], size=max_draws, method="eigh")
@@ -162,18 +211,22 @@ def draws_from_covariance(
     sds, how = _sds({}, sd_grids, max_draws, seed)
     note = (
         "no posterior: Gaussian draws on the internal scale from the fit's covariance "
-        "(a local approximation; run 'idtool sample' or Fit.sample() for the posterior)" + how
+        "(a local approximation; run 'idtool sample' or Fit.sample() for the posterior)"
+        + how
+        + _conditioned(sds, conditioning)
     )
-    return Draws(model, values, "fit covariance", note, sds, seed)
+    return Draws(model, values, "fit covariance", note, sds, seed, conditioning)
 
 
 def prediction_draws(fit: StoredFit, max_draws: int = 2000, seed: int = 0) -> Draws:
     """Posterior draws of a stored fit (``posterior.nc`` beside it), or Gaussian draws
     from its covariance when it has none."""
     path = Path(fit.folder) / POSTERIOR_FILE
+    cond = fit.conditioning
     if path.is_file():
-        return draws_from_stored(load_posterior(path), fit.model, max_draws, fit.sd_grids, seed)
-    return draws_from_covariance(fit.model, fit.z, fit.cov_z, max_draws, seed, fit.sd_grids)
+        stored = load_posterior(path)
+        return draws_from_stored(stored, fit.model, max_draws, fit.sd_grids, seed, cond)
+    return draws_from_covariance(fit.model, fit.z, fit.cov_z, max_draws, seed, fit.sd_grids, cond)
 
 
 def extrapolation_notes(data: FitData, loads_n=(), amplitudes=(), speeds_m_s=()) -> list[str]:
@@ -255,7 +308,7 @@ def predict_friction_ratio(draws: Draws, loads_n, amplitudes, speeds_m_s) -> lis
             jnp.asarray(grid[:, 2]),
         )
     )
-    mean, new = with_variability(fr, draws)
+    mean, new = with_variability(fr, draws, np.asarray(operating_coordinates(*grid.T)))
     med, lo, hi = _band(mean)
     nmed, nlo, nhi = _band(new)
     return [
@@ -271,17 +324,19 @@ def predict_friction_ratio(draws: Draws, loads_n, amplitudes, speeds_m_s) -> lis
     ]
 
 
-def with_variability(fr: np.ndarray, draws: Draws) -> tuple[np.ndarray, np.ndarray]:
-    """FR draws (draws, points) of the physical curve -> the mean FR at each point (the
-    curve times exp(d), d ~ N(0, discrepancy_fr^2) per draw and point) and a new pull's
-    FR (times exp(d + c), c ~ N(0, scatter_fr^2)); both capped at 1 (ultrasound does
-    not raise friction; the simulator and the bench agree). Without sds, both are the
-    curve."""
+def with_variability(fr: np.ndarray, draws: Draws, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """FR draws (draws, points) of the physical curve at operating points ``x`` (points,
+    3; :func:`~idtool._fit._discrepancy.operating_coordinates`) -> the mean FR at each
+    point (the curve times exp(d), d the discrepancy given the data, per draw and point:
+    :meth:`Draws.discrepancy`) and a new pull's FR (times exp(d + c), c ~ N(0,
+    scatter_fr^2)); both capped at 1 (ultrasound does not raise friction; the simulator
+    and the bench agree). Without sds, both are the curve."""
     if not draws.sds:
         return fr, fr
     rng = np.random.default_rng([draws.seed, 2])
     zero = np.zeros(fr.shape[0])
-    disc = draws.sds.get("discrepancy_fr", zero)[:, None] * rng.standard_normal(fr.shape)
+    d_mean, d_var = draws.discrepancy(x)
+    disc = d_mean + np.sqrt(d_var) * rng.standard_normal(fr.shape)
     scatter = draws.sds.get("scatter_fr", zero)[:, None]
     new = disc + scatter * rng.standard_normal(fr.shape)
     return np.minimum(fr * np.exp(disc), 1.0), np.minimum(fr * np.exp(new), 1.0)
@@ -344,14 +399,20 @@ class AmplitudeFor:
 
 
 @jax.jit
-def _amplitude_draws(model: BenchModel, v, load, speed, target_fr):
-    """Per draw in ``v``: the amplitude fraction where FR falls to ``target_fr`` at
-    ``load`` and ``speed`` (inf if full amplitude does not reach it), and FR at full
+def _amplitude_draws(model: BenchModel, v, load, speed, target_fr, kriging, xi):
+    """Per draw in ``v``: the amplitude fraction where the mean FR (the curve times
+    exp(d), d the discrepancy given the data, ``d = mean + sd xi`` with ``xi`` one
+    standard normal per draw: :attr:`Draws.kriging`) falls to ``target_fr`` at ``load``
+    and ``speed`` (inf if full amplitude does not reach it), and that FR at full
     amplitude."""
+    x_rows, scales, weights, s_inv, sd = kriging
 
-    def solve(v, target_fr):
+    def solve(v, weights, s_inv, sd, xi):
         def fr_at(alpha):
-            return model.friction_ratios(v, load[None], alpha[None], speed[None])[0]
+            fr = model.friction_ratios(v, load[None], alpha[None], speed[None])[0]
+            x = operating_coordinates(load, alpha, speed)[None]
+            mean, var = discrepancy_moments(x, x_rows, scales, weights, s_inv, sd)
+            return jnp.minimum(fr * jnp.exp(mean[0] + jnp.sqrt(var[0]) * xi), 1.0)
 
         def step(_, bounds):
             lo, hi = bounds
@@ -364,22 +425,19 @@ def _amplitude_draws(model: BenchModel, v, load, speed, target_fr):
         alpha = jnp.where(fr_full <= target_fr, 0.5 * (lo + hi), jnp.inf)
         return alpha, fr_full
 
-    return jax.vmap(solve)(v, target_fr)
+    return jax.vmap(solve)(v, weights, s_inv, sd, xi)
 
 
 def amplitude_for_reduction(
     draws: Draws, target_reduction_percent: float, loads_n, speeds_m_s
 ) -> list[AmplitudeFor]:
     """The amplitude for ``target_reduction_percent`` at every load x speed."""
-    target_fr = 1.0 - target_reduction_percent / 100.0
+    target_fr = jnp.asarray(1.0 - target_reduction_percent / 100.0)
     v = {k: jnp.asarray(x) for k, x in draws.values.items()}
-    # The mean curve carries the operating-point discrepancy exp(d): FR exp(d) reaches
-    # the target where the physical curve reaches target exp(-d), per draw.
-    shift = np.ones(draws.n)
-    if draws.sds:
-        rng = np.random.default_rng([draws.seed, 3])
-        sd = draws.sds.get("discrepancy_fr", np.zeros(draws.n))
-        shift = np.exp(-sd * rng.standard_normal(draws.n))
+    # The mean curve carries the discrepancy: one standard normal per draw for its
+    # conditional spread along the amplitude axis.
+    xi = np.random.default_rng([draws.seed, 3]).standard_normal(draws.n)
+    kriging = tuple(jnp.asarray(a) for a in draws.kriging)
     out = []
     for load in loads_n:
         for speed in speeds_m_s:
@@ -388,13 +446,14 @@ def amplitude_for_reduction(
                 v,
                 jnp.asarray(float(load)),
                 jnp.asarray(float(speed)),
-                jnp.asarray(target_fr * shift),
+                target_fr,
+                kriging,
+                jnp.asarray(xi),
             )
             alpha, fr_full = np.asarray(alpha), np.asarray(fr_full)
             # quantiles that are actual draws: no interpolation towards +inf
             lo, med, hi = np.percentile(alpha, [2.5, 50.0, 97.5], method="inverted_cdf")
             med, lo, hi = float(med), float(lo), float(hi)
-            fr_full = np.minimum(fr_full / shift, 1.0)  # the mean curve at full amplitude
             rmed, rlo, rhi = (float(x) for x in _band(100.0 * (1.0 - fr_full)))
             out.append(
                 AmplitudeFor(

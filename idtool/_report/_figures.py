@@ -77,8 +77,11 @@ def walker_figure(chains: dict[str, np.ndarray], names: list[str], path: Path) -
 def friction_ratio_figures(
     draws: Draws, points: list[dict], speed_m_s: float, out: Path
 ) -> tuple[Path, Path]:
-    """FR against amplitude (per load) and against load (per amplitude), median and 95%
-    band, with the data's operating points (the fit's per-trace FR) marked."""
+    """FR against amplitude (per load) and against load (per amplitude): the median, the
+    95% band of the mean FR (dark) and of the next pull (light, scatter added); over
+    them each trace's own friction ratio (``fit.json`` traces: ``free_friction_ratio``,
+    estimated from that trace alone, with its 95% interval from its own noise), or the
+    model's per-trace FR when the levels model is off."""
     loads = sorted({p["normal_load_n"] for p in points})
     alphas = sorted({p["amplitude_fraction"] for p in points})
     amp_grid = np.linspace(0.05, 1.0, 16)
@@ -87,32 +90,45 @@ def friction_ratio_figures(
     def band(ls, als):
         preds = predict_friction_ratio(draws, ls, als, [speed_m_s])
         med = np.array([p.median for p in preds])
-        lo = np.array([p.ci95[0] for p in preds])
-        hi = np.array([p.ci95[1] for p in preds])
-        return med, lo, hi
+        lo, hi = (np.array([p.ci95[j] for p in preds]) for j in (0, 1))
+        new = [p.new_trace or (p.median, p.ci95) for p in preds]
+        new_lo, new_hi = (np.array([n[1][j] for n in new]) for j in (0, 1))
+        return med, lo, hi, new_lo, new_hi
+
+    def own(p):  # the trace's own FR and its 95% half-width, or None
+        free = p.get("free_friction_ratio")
+        if free is None:  # a noise-only fit: the model's FR at the trace
+            return p["friction_ratio"]["estimate"], 1.96 * p["friction_ratio"]["std_error"]
+        if not free["measured"]:
+            return None
+        return free["estimate"], 1.96 * free["std_error"]
 
     def marks(ax, key, value, x_key):
-        sel = [p for p in points if p[key] == value]
-        ax.errorbar(
-            [p[x_key] for p in sel],
-            [p["friction_ratio"]["estimate"] for p in sel],
-            [1.96 * p["friction_ratio"]["std_error"] for p in sel],
-            fmt="o",
-            ms=4,
-            color="k",
-            zorder=3,
-        )
+        sel = [(p[x_key], own(p)) for p in points if p[key] == value]
+        sel = [(x, o) for x, o in sel if o is not None]
+        if sel:
+            ax.errorbar(
+                [x for x, _ in sel],
+                [o[0] for _, o in sel],
+                [o[1] for _, o in sel],
+                fmt="o",
+                ms=4,
+                color="k",
+                zorder=3,
+            )
 
     def panel(groups, x_grid, curve, key, x_key, label, xlabel, title, path):
         # One curve and band per group (a load, or an amplitude) against x_grid.
         fig, ax = subplots(figsize=(6, 4))
         for c, value in enumerate(groups):
-            med, lo, hi = curve(value)
-            ax.fill_between(x_grid, lo, hi, color=f"C{c}", alpha=0.25)
+            med, lo, hi, new_lo, new_hi = curve(value)
+            ax.fill_between(x_grid, new_lo, new_hi, color=f"C{c}", alpha=0.12, lw=0)
+            ax.fill_between(x_grid, lo, hi, color=f"C{c}", alpha=0.35, lw=0)
             ax.plot(x_grid, med, color=f"C{c}", label=label(value))
             marks(ax, key, value, x_key)
         ax.set(xlabel=xlabel, ylabel="friction ratio FR", ylim=(0, 1.05))
         ax.legend(title=title)
+        ax.set_title("dark: mean FR 95%; light: next pull 95%; points: each trace", fontsize=9)
         return _save(fig, path)
 
     p1 = panel(

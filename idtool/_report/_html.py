@@ -55,6 +55,28 @@ def _g(x: float) -> str:
     return f"{x:.4g}"
 
 
+def _variability_table(doc: dict) -> str:
+    """The levels model's sds and lack-of-fit test (``fit.json`` ``variability``)."""
+    var = doc.get("variability", {"on": False})
+    if not var.get("on"):
+        return "<p>Scatter and discrepancy: off (noise-only intervals).</p>"
+    rows = [
+        [
+            name,
+            f"{100 * v['estimate']:.2f}%",
+            f"[{100 * v['ci95'][0]:.2f}%, {100 * v['ci95'][1]:.2f}%]",
+        ]
+        for name, v in var["sds"].items()
+    ]
+    lof = var["lack_of_fit"]
+    return (
+        "<p>Pull-to-pull scatter and model discrepancy (relative sds, REML, 95% from "
+        f"each sd's likelihood). Lack of fit of the physical model: chi2 = {lof['chi2']:.1f} "
+        f"on {lof['dof']} dof, p = {lof['p_value']:.3g}.</p>"
+        + _table(["sd", "estimate", "95%"], rows)
+    )
+
+
 def _posterior(folder: Path):
     """(arviz posterior group, idtool metadata) or (None, None)."""
     path = folder / POSTERIOR_FILE
@@ -164,8 +186,13 @@ def write_report(fit_folder: str | Path) -> Path:
 
         p1, p2 = friction_ratio_figures(draws, doc["traces"], speed, figs)
         sec["Friction ratio against amplitude and load"] = (
-            f"<p>Median and 95% band ({html.escape(draws.note)}); points: the fit's "
-            "friction ratio of each trace with its 95% interval.</p>"
+            f"<p>Median and 95% bands ({html.escape(draws.note)}). Dark band: the mean "
+            "friction ratio at that operating point (use it for design curves); light "
+            "band: what the next single pull will give, pull-to-pull scatter added (use "
+            "it for acceptance limits). Points: each trace's own friction ratio, fitted "
+            "from that trace alone, with its 95% interval from its own noise (traces whose "
+            "ON window ends before the force settles measure none).</p>"
+            + _variability_table(doc)
             + _img(p1, "FR against amplitude")
             + _img(p2, "FR against load")
         )

@@ -1,0 +1,133 @@
+"""The physical model's discrepancy as a smooth function of the operating point (issue 10).
+
+What the physical model misses is not noise: a coupling law of the wrong shape misses
+neighbouring operating points by similar amounts. The levels model
+(:mod:`idtool._fit._variability`) therefore treats the discrepancy of log FR as a
+Gaussian process over the operating point ``x = (ln N, alpha, ln v)``:
+
+    d(x) ~ GP(0, discrepancy_fr^2 rho(x, x')),
+    rho(x, x') = exp(-1/2 sum_j ((x_j - x'_j) / l_j)^2)
+
+with length scales ``l_j`` half the range the design spans in each coordinate
+(:func:`length_scales`; floored where the design does not vary). Why half the range:
+with two or three levels per coordinate, as on the paper's matrix, neighbouring levels
+are then correlated (0.14-0.6), so a measured operating point informs the held-out ones
+between its neighbours, while beyond about two length scales outside the design the
+discrepancy reverts to its full, unconditional sd: extrapolation is not trusted. A
+design this small cannot estimate the length scales; the coverage tests on data from
+other coupling laws (tests/test_coverage.py) check the choice.
+
+Predictions condition the discrepancy on the traces' own friction ratios (kriging,
+:class:`Conditioning`): at an operating point the data measured, the mean-FR band follows
+the data and is as narrow as they are; between measured points it is interpolated; far
+from them it carries the whole discrepancy sd. Given the physical parameters theta and the
+sds, ``d(x*) | y`` is Gaussian with
+
+    mean  s_d^2 k*^T S^-1 (y - g(theta)),   variance  s_d^2 - s_d^4 k*^T S^-1 k*,
+    S = V + s_c^2 I + s_d^2 K
+
+over the measured friction ratios ``y`` (their noise covariance ``V``, scatter sd
+``s_c``): exact for each draw of (theta, sds) from their posterior, so the draws carry
+the whole uncertainty.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from idtool._data._blocks import FitData
+
+__all__ = [
+    "SCALE_FLOORS",
+    "Conditioning",
+    "correlation",
+    "discrepancy_moments",
+    "length_scales",
+    "operating_coordinates",
+]
+
+# Smallest length scales, for coordinates the design does not vary (or barely): 10% in
+# load and speed, 0.05 in amplitude fraction. The discrepancy at another load than the
+# only one measured is then unconditional a little way off it.
+SCALE_FLOORS = np.array([0.1, 0.05, 0.1])
+NUGGET_FRACTION = 0.1
+
+
+def operating_coordinates(load_n: ArrayLike, alpha: ArrayLike, speed_m_s: ArrayLike) -> Array:
+    """``(ln N, alpha, ln v)`` of operating points, (..., 3): loads [N] and speeds
+    [m/s] on log scales (the model's response is multiplicative in both)."""
+    return jnp.stack(
+        [jnp.log(jnp.asarray(load_n)), jnp.asarray(alpha), jnp.log(jnp.asarray(speed_m_s))],
+        axis=-1,
+    )
+
+
+def length_scales(data: FitData) -> np.ndarray:
+    """The correlation length per coordinate: half the design's range, floored
+    (:data:`SCALE_FLOORS`; module docstring)."""
+    x = np.asarray(operating_coordinates(data.op_load_n, data.op_alpha, data.op_speed_m_s))
+    return np.maximum(0.5 * np.ptp(x, axis=0), SCALE_FLOORS)
+
+
+def correlation(
+    xa: Float[ArrayLike, "a 3"], xb: Float[ArrayLike, "b 3"], scales: Float[ArrayLike, " 3"]
+) -> Float[Array, "a b"]:
+    """The discrepancy's correlation between operating points (module docstring)."""
+    diff = (jnp.asarray(xa)[:, None, :] - jnp.asarray(xb)[None, :, :]) / jnp.asarray(scales)
+    smooth = jnp.exp(-0.5 * jnp.sum(diff**2, axis=-1))
+    same = jnp.all(jnp.abs(diff) < 1e-9, axis=-1)
+    return (1.0 - NUGGET_FRACTION) * smooth + NUGGET_FRACTION * same
+
+
+def discrepancy_moments(
+    x_new: Float[ArrayLike, "p 3"],
+    x_rows: Float[ArrayLike, "n 3"],
+    scales: Float[ArrayLike, " 3"],
+    weights: Float[ArrayLike, " n"],
+    s_inv: Float[ArrayLike, "n n"],
+    sd_disc: Float[ArrayLike, ""],
+) -> tuple[Float[Array, " p"], Float[Array, " p"]]:
+    """Mean and variance of the discrepancy at ``x_new`` given the data, for one draw
+    (module docstring): ``weights = S^-1 (y - g)`` and ``s_inv = S^-1`` of that draw
+    (zeros for the unconditional discrepancy). Jittable."""
+    s2 = jnp.asarray(sd_disc) ** 2
+    k = correlation(x_new, x_rows, scales)  # (p, n)
+    mean = s2 * (k @ weights)
+    reduction = jnp.einsum("pn,nm,pm->p", k, s_inv, k)
+    return mean, jnp.maximum(s2 - s2**2 * reduction, 0.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class Conditioning:
+    """What conditioning the discrepancy on the data needs: the measured friction
+    ratios' coordinates ``x`` (n, 3), their free estimates ``y`` (log FR, n) and noise
+    covariance ``v`` (n, n), and the length scales."""
+
+    x: np.ndarray
+    y: np.ndarray
+    v: np.ndarray
+    scales: np.ndarray
+
+    @property
+    def rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Load [N], amplitude fraction and speed [m/s] of the measured rows."""
+        return np.exp(self.x[:, 0]), self.x[:, 1], np.exp(self.x[:, 2])
+
+    def weights(
+        self, log_fr_model: np.ndarray, sd_disc: np.ndarray, sd_scatter: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Per draw: ``S^-1 (y - g)`` (draws, n) and ``S^-1`` (draws, n, n), from the
+        model's log FR at the measured rows (draws, n) and the draws' sds (draws,)."""
+        k = np.asarray(correlation(self.x, self.x, self.scales))
+        n = self.y.size
+        s = (
+            self.v[None]
+            + (sd_scatter**2)[:, None, None] * np.eye(n)[None]
+            + (sd_disc**2)[:, None, None] * k[None]
+        )
+        s_inv = np.linalg.inv(s)
+        return np.einsum("dij,dj->di", s_inv, self.y[None] - log_fr_model), s_inv

@@ -1,0 +1,143 @@
+"""Coverage of idtool's intervals on benches that depart from the fit's model (issue 10).
+
+Recovering the truth from the fit's own simulator proves little, so every dataset here
+has a departure the fit does not assume (idtool._simulate._departures): pull-to-pull
+scatter, a lagging rate-limited actuator, 60 Hz mains at 2 kHz, offset drift, a coupling
+law the fit does not ship, and all of them together; plus clean data, where the bands
+must not widen. 7 kinds x 3 seeds = 21 datasets on the paper's matrix (24 traces), each
+fitted with the defaults a new user gets (``idtool.fit(dataset)``), and scored against
+the truth:
+
+* the mean friction ratio at 6 held-out operating points (360 and 560 N x 50, 60, 70%)
+  inside its 95% band (``Prediction.ci95``): at least 90% of the 126 overall, and no
+  kind below 15 of 18 (a kind that collapses is a defect even if the others carry the
+  total; 15/18 is below the 95% rate by more than two binomial sds of 18 points);
+* 50 simulated new pulls per held-out point (the truth times the bench's FR scatter)
+  inside the ``new_trace`` band: at least 90%;
+* Kt and mu inside their 95% intervals in at least 85% of the datasets (3 misses of 21;
+  mu reaches 17 of 21 today, an expected failure until the fit models offset drift);
+* on clean data the bands no more than 20% wider than the noise-only model's, and on
+  every dataset a mean half-width at the paper's matrix of at most 0.03 in FR.
+
+The fits take about 5 minutes on 2 cores: marked slow, still part of the default run.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import idtool
+from idtool._simulate._departures import DEPARTURE_KINDS, departure_params
+from idtool._simulate._simulate import true_friction_ratio
+
+pytestmark = pytest.mark.slow
+
+SEEDS = (1, 2, 3)
+HELD_OUT = ([360.0, 560.0], [0.5, 0.6, 0.7])
+MATRIX = ([270.0, 450.0, 670.0], [0.5, 0.7])
+NEW_PULLS = 50
+
+
+def _score(kind: str, seed: int) -> dict:
+    params = departure_params(kind, seed)
+    dataset, _ = idtool.simulate_bench(params, seed=seed)
+    with warnings.catch_warnings():
+        # the fit's own warnings (lack of fit, correlations) are part of its report
+        warnings.simplefilter("ignore")
+        fit = idtool.fit(dataset, seed=0)
+        plain = idtool.fit(dataset, seed=0, variability=False) if kind == "clean" else None
+    scatter = params.scatter.friction_ratio_sd if params.scatter is not None else 0.0
+    rng = np.random.default_rng([seed, 7])
+    inside, new_inside = [], []
+    for p in fit.predict(*HELD_OUT):
+        truth = true_friction_ratio(params, p.normal_load_n, p.amplitude_fraction)
+        inside.append(p.ci95[0] <= truth <= p.ci95[1])
+        pulls = np.minimum(truth * np.exp(rng.normal(0.0, scatter, NEW_PULLS)), 1.0)
+        lo, hi = p.new_trace[1] if p.new_trace is not None else p.ci95
+        new_inside.append(float(np.mean((pulls >= lo) & (pulls <= hi))))
+
+    def half_width(f) -> float:
+        return float(np.mean([(p.ci95[1] - p.ci95[0]) / 2 for p in f.predict(*MATRIX)]))
+
+    contact = params.contact
+    out = {
+        "kind": kind,
+        "inside": inside,
+        "new_inside": new_inside,
+        "Kt": fit.estimates["Kt"].ci95[0]
+        <= contact.contact_stiffness_n_m
+        <= fit.estimates["Kt"].ci95[1],
+        "mu": fit.estimates["mu"].ci95[0]
+        <= contact.friction_coefficient
+        <= fit.estimates["mu"].ci95[1],
+        "half_width": half_width(fit),
+        "actuator": fit.model.actuator.name,
+    }
+    if plain is not None:
+        out["half_width_noise_only"] = half_width(plain)
+    return out
+
+
+@pytest.fixture(scope="module")
+def scores() -> list[dict]:
+    out = [_score(kind, seed) for kind in DEPARTURE_KINDS for seed in SEEDS]
+    for kind in DEPARTURE_KINDS:  # the table the issue's closing note quotes (pytest -s)
+        rows = [s for s in out if s["kind"] == kind]
+        inside = sum(sum(s["inside"]) for s in rows)
+        print(
+            f"{kind:9s} held-out {inside}/{6 * len(rows)}  new pulls "
+            f"{100 * np.mean([np.mean(s['new_inside']) for s in rows]):.0f}%  Kt "
+            f"{sum(s['Kt'] for s in rows)}/{len(rows)}  mu {sum(s['mu'] for s in rows)}/"
+            f"{len(rows)}  half-width {np.mean([s['half_width'] for s in rows]):.4f}  "
+            f"actuator {','.join(s['actuator'] for s in rows)}"
+        )
+    return out
+
+
+def test_enough_datasets_of_every_kind(scores):
+    assert len(scores) >= 20
+    assert {s["kind"] for s in scores} == set(DEPARTURE_KINDS)
+
+
+def test_mean_friction_ratio_bands_cover_held_out_points(scores):
+    inside = np.concatenate([s["inside"] for s in scores])
+    assert inside.mean() >= 0.90, inside.mean()
+    for kind in DEPARTURE_KINDS:
+        hits = sum(sum(s["inside"]) for s in scores if s["kind"] == kind)
+        assert hits >= 15, (kind, hits)
+
+
+def test_new_trace_bands_hold_new_pulls(scores):
+    rate = np.mean([np.mean(s["new_inside"]) for s in scores])
+    assert rate >= 0.90, rate
+
+
+def test_kt_interval_covers_the_truth(scores):
+    rate = np.mean([s["Kt"] for s in scores])
+    assert rate >= 0.85, rate
+
+
+@pytest.mark.xfail(
+    reason="known gap (issue 10 open): mu's interval covers 17 of 21; the offset drift "
+    "is not in the fit yet and shifts each trace's OFF level",
+    strict=False,
+)
+def test_mu_interval_covers_the_truth(scores):
+    rate = np.mean([s["mu"] for s in scores])
+    assert rate >= 0.85, rate
+
+
+def test_bands_stay_useful_and_clean_data_keeps_its_precision(scores):
+    for s in scores:
+        assert s["half_width"] <= 0.03, s
+        if "half_width_noise_only" in s:
+            assert s["half_width"] <= 1.2 * s["half_width_noise_only"], s
+
+
+def test_the_lag_actuator_is_found_where_there_is_one(scores):
+    for s in scores:
+        lagging = s["kind"] in ("actuator", "all")
+        assert (s["actuator"] == "lag") == lagging, s
