@@ -99,7 +99,8 @@ class FitResult:
 
     @property
     def sd_grids(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        """The scatter and discrepancy sds' REML likelihood grids (empty when off)."""
+        """The scatter and discrepancy sds' posterior grids (REML likelihood times the
+        spike-and-slab prior; empty when off)."""
         return dict(self.variability.grids) if self.variability is not None else {}
 
     @property

@@ -63,7 +63,7 @@ class StoredFit:
     cov_z: np.ndarray
     phi: float
     sigma_n: float
-    # the levels model's sds: name -> (sd values, REML probabilities); empty when off
+    # the levels model's sds: name -> (sd values, posterior probabilities); empty when off
     sd_grids: dict[str, tuple[np.ndarray, np.ndarray]] = dataclasses.field(default_factory=dict)
     # the free levels and the sds (estimate, ci95 lo, hi), or None when off
     levels: tuple[FreeLevels, dict[str, tuple[float, float, float]]] | None = None

@@ -106,7 +106,7 @@ SD_PARAMS = (
         "(relative): what the model's curve misses",
     ),
 )
-_GRID = 241  # points of each sd's REML likelihood grid
+_GRID = 241  # points of each sd's grid (REML likelihood times the spike-and-slab prior)
 SD_SLAB_SCALE = 0.1  # half-normal scale of an sd's prior when it is not zero
 SD_PRIOR_ZERO = 0.5  # prior probability that an sd is zero
 
@@ -269,7 +269,8 @@ class Variability:
     estimate of the physical parameters.
 
     ``sds`` maps each of :data:`SD_PARAMS` to (estimate, ci95 low, ci95 high); ``grids``
-    each to its REML likelihood on a grid ``(sd values, probabilities)``.
+    each to its posterior on a grid ``(sd values, probabilities)``: REML likelihood times
+    the spike-and-slab prior (module docstring).
     """
 
     free: FreeLevels
@@ -333,11 +334,10 @@ def level_design(model: BenchModel, measured: np.ndarray) -> LevelDesign:
     kinds = np.zeros((n, 2))
     kinds[:m, 0] = 1.0
     kinds[m:, 1] = 1.0
-    d = model.data
-    op = np.asarray(d.op_index)[idx]
-    x = operating_coordinates(d.op_load_n[op], d.op_alpha[op], d.op_speed_m_s[op])
+    op = np.asarray(model.data.op_index)[idx]
+    x = _measured_coordinates(model, measured)
     disc_corr = np.zeros((n, n))
-    disc_corr[m:, m:] = np.asarray(correlation(x, x, length_scales(d)))
+    disc_corr[m:, m:] = np.asarray(correlation(x, x, length_scales(model.data)))
     repeated = bool(op.size and np.any(np.bincount(op) >= 2))
     active = np.array([True, repeated, op.size > 0])
     return LevelDesign(np.concatenate([np.arange(m), m + idx]), kinds, disc_corr, op, active)
@@ -346,10 +346,17 @@ def level_design(model: BenchModel, measured: np.ndarray) -> LevelDesign:
 def discrepancy_conditioning(model: BenchModel, free: FreeLevels) -> Conditioning:
     """What predictions need to condition the discrepancy on the traces' own friction
     ratios (:class:`~idtool._fit._discrepancy.Conditioning`)."""
-    d, m = model.data, free.off_n.size
-    op = np.asarray(d.op_index)[free.measured]
-    x = np.asarray(operating_coordinates(d.op_load_n[op], d.op_alpha[op], d.op_speed_m_s[op]))
-    return Conditioning(x, free.y[m:], free.cov_y[m:, m:], length_scales(d))
+    m = free.off_n.size
+    x = _measured_coordinates(model, free.measured)
+    return Conditioning(x, free.y[m:], free.cov_y[m:, m:], length_scales(model.data))
+
+
+def _measured_coordinates(model: BenchModel, measured: np.ndarray) -> np.ndarray:
+    """Operating-point coordinates (:func:`operating_coordinates`) of the traces whose
+    ON level is ``measured``: the FR rows of the levels model, in trace order."""
+    d = model.data
+    op = np.asarray(d.op_index)[measured]
+    return np.asarray(operating_coordinates(d.op_load_n[op], d.op_alpha[op], d.op_speed_m_s[op]))
 
 
 def _spike_and_slab(grid: np.ndarray, likelihood: np.ndarray) -> np.ndarray:

@@ -112,7 +112,8 @@ SdGrids = dict[str, tuple[np.ndarray, np.ndarray]]
 def _sds(
     sampled: dict[str, np.ndarray], grids: SdGrids | None, n: int, seed: int
 ) -> tuple[dict[str, np.ndarray], str]:
-    """Per-draw sds: the sampled ones, else draws from the fit's REML grids (seeded);
+    """Per-draw sds: the sampled ones, else draws from the fit's sd grids (REML
+    likelihood times the spike-and-slab prior; seeded);
     and a note on where they came from."""
     if all(name in sampled for name in SD_NAMES):
         return {name: sampled[name] for name in SD_NAMES}, ""
@@ -120,7 +121,10 @@ def _sds(
         return {}, "; no scatter or discrepancy in the model: the bands are the noise's only"
     rng = np.random.default_rng([seed, 1])
     out = {name: rng.choice(grid, size=n, p=prob) for name, (grid, prob) in grids.items()}
-    return out, "; scatter and discrepancy sds drawn from the fit's REML likelihood"
+    return out, (
+        "; scatter and discrepancy sds drawn from the fit's REML likelihood times a "
+        "spike-and-slab prior"
+    )
 
 
 def draws_from_posterior(
@@ -200,7 +204,7 @@ def draws_from_covariance(
 ) -> Draws:
     """Gaussian draws on the internal scale from a fit's covariance: a local
     approximation of the posterior, mapped through the transforms; the sds from the
-    fit's REML grids ``sd_grids``; the discrepancy conditioned on ``conditioning``."""
+    fit's sd grids ``sd_grids``; the discrepancy conditioned on ``conditioning``."""
     k = model.n_physical
     rng = np.random.default_rng(seed)
     draws = rng.multivariate_normal(z[:k], cov_z[:k, :k], size=max_draws, method="eigh")

@@ -155,7 +155,7 @@ def _variability_lines(r: FitResult) -> list[str]:
         return ["[[Scatter and discrepancy]]  off (--variability off): noise-only intervals"]
     lines = [
         "[[Scatter and discrepancy]]  (sds on the log scale, i.e. relative; REML, "
-        "95% from each sd's likelihood)"
+        "95% from each sd's likelihood times a prior with P(zero) = 1/2)"
     ]
     fr_typ = float(np.nanmedian(var.free.friction_ratio)) if var.free.measured.any() else 1.0
     for name, (est, lo, hi) in var.sds.items():

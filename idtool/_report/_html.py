@@ -70,8 +70,9 @@ def _variability_table(doc: dict) -> str:
     ]
     lof = var["lack_of_fit"]
     return (
-        "<p>Pull-to-pull scatter and model discrepancy (relative sds, REML, 95% from "
-        f"each sd's likelihood). Lack of fit of the physical model: chi2 = {lof['chi2']:.1f} "
+        "<p>Pull-to-pull scatter and model discrepancy (relative sds, REML; 95% from "
+        "each sd's REML likelihood times a prior that gives 'zero' probability 1/2). "
+        f"Lack of fit of the physical model: chi2 = {lof['chi2']:.1f} "
         f"on {lof['dof']} dof, p = {lof['p_value']:.3g}.</p>"
         + _table(["sd", "estimate", "95%"], rows)
     )
