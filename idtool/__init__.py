@@ -36,6 +36,10 @@ _LAZY = {
     "AbstractActuator": "idtool._model._actuator",
     "LagActuator": "idtool._model._actuator",
     "SlopeActuator": "idtool._model._actuator",
+    "OFFSETS": "idtool._model._offset",
+    "AbstractOffset": "idtool._model._offset",
+    "ConstantOffset": "idtool._model._offset",
+    "DriftingOffset": "idtool._model._offset",
     "BenchModel": "idtool._model._benchmodel",
     "bench_model": "idtool._model._benchmodel",
     "CycleAverage": "idtool._model._contact",
@@ -86,21 +90,25 @@ __all__ = [
     "COUPLINGS",
     "FRICTION_LAWS",
     "NOISE_MODELS",
+    "OFFSETS",
     "SEED_FIGURES",
     "AbstractActuator",
     "AbstractCoupling",
     "AbstractFrictionLaw",
     "AbstractNoise",
+    "AbstractOffset",
     "AmplitudeFor",
     "Amplitudes",
     "BenchModel",
     "BenchParams",
     "BenchTruth",
     "ConstantCoupling",
+    "ConstantOffset",
     "Coulomb",
     "CycleAverage",
     "Dahl",
     "Dataset",
+    "DriftingOffset",
     "EnergyBalance",
     "Estimate",
     "Fit",
@@ -174,6 +182,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
     from idtool._model._laws import FRICTION_LAWS, AbstractFrictionLaw, Coulomb, Dahl, LuGre
     from idtool._model._limits import coulomb_friction_ratio, dahl_small_lambda_friction_ratio
     from idtool._model._noise import NOISE_MODELS, AbstractNoise
+    from idtool._model._offset import OFFSETS, AbstractOffset, ConstantOffset, DriftingOffset
     from idtool._model._params import Param
     from idtool._model._seed_study import SEED_FIGURES, plot_seed_study, seed_study
     from idtool._model._transducer import (

@@ -117,6 +117,14 @@ class Fit:
         return list(self._state.doc.get("warnings", []))
 
     @property
+    def notes(self) -> list[str]:
+        """What the data let the fit measure (one trace per operating point, ON windows
+        too short to settle): facts for the report, not doubts (:attr:`warnings`)."""
+        if isinstance(self._state, FitResult):
+            return list(self._state.notes)
+        return list(self._state.doc.get("notes", []))
+
+    @property
     def result(self) -> FitResult:
         """The chosen model's full fit result (in memory only, not after load_fit)."""
         if not isinstance(self._state, FitResult):
@@ -288,6 +296,7 @@ def fit(
     mains_hz: float | None = None,
     variability: bool = True,
     actuator: str = "auto",
+    offset: str = "auto",
 ) -> Fit:
     """Identify Kt, mu and the coupling from every trace of ``dataset`` at once.
 
@@ -312,6 +321,9 @@ def fit(
         actuator: how the pull force follows its target, a name of
             :data:`idtool.ACTUATORS` ("slope": constant slopes; "lag": a first-order lag
             with a rate limit), or "auto" (default: both, the lower BIC kept).
+        offset: the load-cell offset within a trace, a name of :data:`idtool.OFFSETS`
+            ("constant"; "drift": a linear drift per trace), or "auto" (default: both,
+            the lower BIC kept).
     """
     if starts < 1:
         raise IdtoolError(f"starts = {starts}: give at least 1")
@@ -330,6 +342,7 @@ def fit(
         noise=noise,
         variability=variability,
         actuator=actuator,
+        offset=offset,
     )
     out = Fit(dataset, run.chosen, run)
     out.seconds = time.perf_counter() - started

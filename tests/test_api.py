@@ -116,7 +116,7 @@ def test_a_coupling_law_is_one_class_plus_its_registration(load_decay, tmp_path)
     assert load_decay in coupling.choices
     # and "auto" fits it too, ranked by BIC with the shipped laws
     auto = idtool.fit(dataset, coupling="auto", seed=0)
-    assert f"dahl/{load_decay}/slope" in auto.run.candidates
+    assert f"dahl/{load_decay}/slope/constant" in auto.run.candidates
     # read back from disk: the law comes from the registry by its recorded name
     back = idtool.load_fit(tmp_path / "fit")
     assert back.model.coupling is LoadDecayCoupling

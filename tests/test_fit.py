@@ -234,9 +234,12 @@ def test_profile_likelihood_agrees_with_the_gauss_newton_interval():
 
 def test_lugre_fit_runs_and_ranks_against_dahl():
     dataset, _ = small_dataset(22)
-    run = fit_dataset(dataset, seed=0, compare_laws=True, actuator="slope")
-    assert set(run.candidates) == {"dahl/power-limited/slope", "lugre/power-limited/slope"}
-    lugre = run.candidates["lugre/power-limited/slope"]
+    run = fit_dataset(dataset, seed=0, compare_laws=True, actuator="slope", offset="constant")
+    assert set(run.candidates) == {
+        "dahl/power-limited/slope/constant",
+        "lugre/power-limited/slope/constant",
+    }
+    lugre = run.candidates["lugre/power-limited/slope/constant"]
     assert {"static_ratio", "stribeck_velocity_m_s"} <= set(lugre.model.physical_names)
     # The data come from Dahl: LuGre's two extra parameters cannot win by BIC.
     assert run.chosen.model.law.name == "dahl"

@@ -219,11 +219,14 @@ def test_corrupt_chain_is_refused(tmp_path):
         sample_posterior(run.chosen, steps=20, chain_path=chain, resume=True)
 
 
-def test_marginal_likelihood_equals_the_dense_gaussian_integral():
+@pytest.mark.parametrize("offset", ["constant", "drift"])
+def test_marginal_likelihood_equals_the_dense_gaussian_integral(offset):
     """The per-trace Cholesky algebra against log N(w; 0, sigma^2 I + s^2 J_w J_w^T)
-    on whitened residuals (two traces, so the dense matrix is small)."""
+    on whitened residuals (two traces, so the dense matrix is small); with the drifting
+    offset each trace has 5 nuisances, not 4."""
     data = two_trace_data()
-    model = bench_model(data, coupling="constant")
+    model = bench_model(data, coupling="constant", offset=offset)
+    g = len(model.trace_groups)
     z = model.z0(Kt=1e9, coupling_gain=0.02)
     table = {p.name: default_prior(p) for p in sampled_params(model)}
     target = build_target(model, z, "ar1", table)
@@ -236,9 +239,9 @@ def test_marginal_likelihood_equals_the_dense_gaussian_integral():
     w = np.asarray(whiten(e_res, target.first, phi))
     jw = np.asarray(whiten(target.jac_e, target.first, phi))
     n, t = w.size, np.asarray(target.model.data.block_trace)
-    big = np.zeros((n, 4 * target.model.data.n_traces))  # nuisance columns of every trace
+    big = np.zeros((n, g * target.model.data.n_traces))  # nuisance columns of every trace
     for i in range(target.model.data.n_traces):
-        big[t == i, 4 * i : 4 * i + 4] = jw[t == i]
+        big[t == i, g * i : g * i + g] = jw[t == i]
     cov = sigma**2 * np.eye(n) + 100.0**2 * big @ big.T
     sign, logdet = np.linalg.slogdet(cov)
     dense = -0.5 * (n * np.log(2 * np.pi) + logdet + w @ np.linalg.solve(cov, w))

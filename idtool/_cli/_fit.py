@@ -26,6 +26,7 @@ def _run(args: argparse.Namespace) -> int:
         noise=args.noise,
         variability=args.variability == "on",
         actuator=args.actuator,
+        offset=args.offset,
         seed=args.seed,
         starts=args.starts,
         compare_laws=args.compare_laws,
@@ -42,7 +43,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from idtool import ACTUATORS, COUPLINGS, FRICTION_LAWS, NOISE_MODELS
+    from idtool import ACTUATORS, COUPLINGS, FRICTION_LAWS, NOISE_MODELS, OFFSETS
     from idtool._model._noise import DEFAULT_NOISE
 
     fittable = [n for n in FRICTION_LAWS if FRICTION_LAWS.get(n).fit_params]
@@ -68,6 +69,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="auto",
         help="how the force follows its target: slope (constant slopes), lag (first-order "
         "lag with a rate limit); default auto fits both and keeps the lower BIC",
+    )
+    p.add_argument(
+        "--offset",
+        choices=(*OFFSETS.names(), "auto"),
+        default="auto",
+        help="the load-cell offset within a trace: constant, drift (linear, per trace); "
+        "default auto fits both and keeps the lower BIC",
     )
     p.add_argument(
         "--noise",

@@ -35,6 +35,7 @@ from idtool._fit._lm import LMResult, levenberg_marquardt
 from idtool._model._actuator import DEFAULT_ACTUATOR
 from idtool._model._benchmodel import BenchModel, bench_model
 from idtool._model._noise import DEFAULT_NOISE
+from idtool._model._offset import DEFAULT_OFFSET
 from idtool._model._params import Param
 
 if TYPE_CHECKING:
@@ -96,6 +97,8 @@ class FitResult:
     jacobian_evaluations: int  # linearisations: residuals plus one JVP per colour
     # the levels model's scatter and discrepancy (issue 10), when it is on
     variability: Variability | None = None
+    # what the data let the fit measure, for the report (not doubts: those are warnings)
+    notes: list[str] = dataclasses.field(default_factory=list)
 
     @property
     def sd_grids(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -246,11 +249,13 @@ def fit_model(
     noise: str = DEFAULT_NOISE,
     actuator: str = DEFAULT_ACTUATOR,
     start_from: FitResult | None = None,
+    offset: str = DEFAULT_OFFSET,
 ) -> FitResult:
-    """Fit one law, coupling and actuator model to prepared data; see the module
-    docstring. ``start_from``: a fit of a model this one nests (the slope actuator for
-    the lag one): its optimum is the start, with no multi-start (same basin)."""
-    model = bench_model(data, law, coupling, noise, actuator)
+    """Fit one law, coupling, actuator and load-cell offset model to prepared data; see
+    the module docstring. ``start_from``: a fit of a model this one nests (the slope
+    actuator for the lag one, the constant offset for the drifting one): its optimum is
+    the start, with no multi-start (same basin)."""
+    model = bench_model(data, law, coupling, noise, actuator, offset)
     k = model.n_physical
     base = model.z0()
     everything = jnp.ones(base.size, bool)

@@ -8,7 +8,10 @@ many (thousands of blocks): AIC's penalty of 2 per parameter would let the riche
 win on noise. With a single normal load the power limit cannot show, so ``auto`` keeps
 the constant coupling and says so. The actuator model is chosen the same way by default
 (``actuator="auto"``: the slope model and the lag model that nests it,
-:mod:`idtool._model._actuator`).
+:mod:`idtool._model._actuator`), and then the load-cell offset model (``offset="auto"``:
+a constant offset per trace, or one that drifts linearly within the trace,
+:mod:`idtool._model._offset`), each richer model started from the optimum of the one
+it nests.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from idtool._model._actuator import ACTUATORS
 from idtool._model._coupling import COUPLINGS
 from idtool._model._laws import FRICTION_LAWS
 from idtool._model._noise import DEFAULT_NOISE
+from idtool._model._offset import OFFSETS
 
 __all__ = ["FitRun", "Profile", "fit_dataset", "profile_parameter"]
 
@@ -58,8 +62,8 @@ class FitRun:
         return sorted(self.candidates.items(), key=lambda kv: kv[1].bic)
 
 
-def _key(law: str, coupling: str, actuator: str) -> str:
-    return f"{law}/{coupling}/{actuator}"
+def _key(law: str, coupling: str, actuator: str, offset: str) -> str:
+    return f"{law}/{coupling}/{actuator}/{offset}"
 
 
 def fit_dataset(
@@ -74,11 +78,13 @@ def fit_dataset(
     noise: str = DEFAULT_NOISE,
     variability: bool = True,
     actuator: str = "auto",
+    offset: str = "auto",
 ) -> FitRun:
-    """Fit ``dataset``; ``law``, ``coupling``, ``noise`` and ``actuator`` by registered
-    name (:data:`FRICTION_LAWS`, :data:`COUPLINGS`, :data:`NOISE_MODELS`,
-    :data:`ACTUATORS`); ``coupling="auto"`` fits every registered coupling law,
-    ``actuator="auto"`` (default) every actuator model, ``compare_laws`` every friction
+    """Fit ``dataset``; ``law``, ``coupling``, ``noise``, ``actuator`` and ``offset`` by
+    registered name (:data:`FRICTION_LAWS`, :data:`COUPLINGS`, :data:`NOISE_MODELS`,
+    :data:`ACTUATORS`, :data:`OFFSETS`); ``coupling="auto"`` fits every registered
+    coupling law, ``actuator="auto"`` (default) every actuator model, ``offset="auto"``
+    (default) every offset model on the best actuator, ``compare_laws`` every friction
     law with a contact stiffness; BIC chooses. ``mains_hz`` [Hz]: the block means span
     whole periods of it; None takes ``rig.mains_frequency_hz``, else the hum found in
     the traces, else 50 Hz (:func:`idtool._data._mains.resolve_mains`). ``variability``
@@ -95,17 +101,27 @@ def fit_dataset(
     if coupling == "auto" and single_load:
         couplings = ("constant",)
     actuators = ACTUATORS.names() if actuator == "auto" else (ACTUATORS.get(actuator).name,)
-    candidates = {}
+    offsets = OFFSETS.names() if offset == "auto" else (OFFSETS.get(offset).name,)
+    candidates: dict[str, FitResult] = {}
     for lw in laws:
         for cp in couplings:
             # the simplest actuator model first (multi-start), each richer one nested in
-            # it from its optimum (ACTUATORS is registered simplest first)
+            # it from its optimum; then each richer offset model nested in the best of
+            # them (both registries list the simplest model first)
+            group: dict[str, FitResult] = {}
             nested = None
             for ac in actuators:
-                candidates[_key(lw, cp, ac)] = fit = fit_model(
-                    data, lw, cp, seed, n_starts, noise, actuator=ac, start_from=nested
+                group[_key(lw, cp, ac, offsets[0])] = fit = fit_model(
+                    data, lw, cp, seed, n_starts, noise, ac, start_from=nested, offset=offsets[0]
                 )
                 nested = nested or fit
+            base = min(group.values(), key=lambda f: f.bic)
+            for of in offsets[1:]:
+                ac = base.model.actuator.name
+                group[_key(lw, cp, ac, of)] = fit_model(
+                    data, lw, cp, seed, n_starts, noise, ac, start_from=base, offset=of
+                )
+            candidates |= group
     ranked = sorted(candidates.items(), key=lambda kv: kv[1].bic)
     best_key, best = ranked[0]
     best = candidates[best_key] = check_intervals(best)

@@ -147,6 +147,7 @@ def load_stored_fit(folder: str | Path) -> StoredFit:
         doc["coupling"],
         doc["noise"].get("name", "ar1"),
         doc.get("actuator", {}).get("name", "slope"),  # fits before the lag model: slope
+        doc.get("offset", {}).get("name", "constant"),  # before the drift model: constant
     )
     if tuple(state["names"]) != model.names:
         raise IdtoolError(f"{state_path}: parameters do not match the model; fit again")

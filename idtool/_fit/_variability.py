@@ -285,6 +285,7 @@ class Variability:
     loglik: float
     loglik_without: float  # at zero sds
     warnings: tuple[str, ...]
+    notes: tuple[str, ...] = ()  # facts about the data for the report, not doubts
 
     def summary(self) -> str:
         """One line per sd, in relative terms, for reports."""
@@ -443,14 +444,17 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
             f"explains (chi2 = {chi2:.1f} on {dof} degrees of freedom, p = {p_value:.2g}): "
             "pull-to-pull scatter or model discrepancy; both are in the bands"
         )
+    # What the design lets the levels model measure: facts of the data, not doubts about
+    # the fit (a short ON window is the bench's design, the OFF level still counts).
+    notes = []
     if not separable:
-        warnings.append(
+        notes.append(
             "one trace per operating point: pull-to-pull scatter and model discrepancy "
             "cannot be told apart; discrepancy_fr is their sum"
         )
     unmeasured = int(np.count_nonzero(~free.measured))
     if unmeasured:
-        warnings.append(
+        notes.append(
             f"{unmeasured} trace(s) switch the horn off before the force settles at its ON "
             f"level (< {MIN_AT_LEVEL_S} s at level): their friction ratio is not measured "
             "on its own and enters the levels model through the OFF level only"
@@ -468,6 +472,7 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
         loglik=-float(nll) - const,
         loglik_without=-float(nll0) - const,
         warnings=tuple(warnings),
+        notes=tuple(notes),
     )
 
 
@@ -508,5 +513,6 @@ def with_variability(result: FitResult) -> FitResult:
         friction_ratio=fr,
         friction_ratio_se=fr_se,
         warnings=[*result.warnings, *v.warnings],
+        notes=[*result.notes, *v.notes],
         variability=v,
     )

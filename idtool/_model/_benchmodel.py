@@ -2,10 +2,11 @@
 
 A :class:`BenchModel` is an ``eqx.Module``: the block-averaged traces
 (:class:`~idtool._data._blocks.FitData`) are its leaves, so one compiled program serves
-every dataset of the same shape; the friction law, the coupling law, the actuator model
-and the noise model are static types, each declaring its own parameters (``fit_params``,
-``params``) and registered by name (:data:`FRICTION_LAWS`, :data:`COUPLINGS`,
-:data:`ACTUATORS`, :data:`NOISE_MODELS`).
+every dataset of the same shape; the friction law, the coupling law, the actuator model,
+the load-cell offset model and the noise model are static types, each declaring its own
+parameters (``fit_params``, ``trace_params``, ``params``) and registered by name
+(:data:`FRICTION_LAWS`, :data:`COUPLINGS`, :data:`ACTUATORS`, :data:`OFFSETS`,
+:data:`NOISE_MODELS`).
 
 Parameters, in the order of the internal vector ``z``:
 
@@ -14,9 +15,11 @@ Parameters, in the order of the internal vector ``z``:
   ``power_load_n`` [N] for the power-limited law);
 * shared bench ones: the actuator model's, ``slope_n_s`` and ``startup_slope_n_s``
   [N/s] (the lag model adds ``time_constant_s`` [s], :mod:`idtool._model._actuator`);
-* per trace (:data:`TRACE_GROUPS`): the load-cell offset [N] (it drifts between pulls;
-  the baseline before each pull measures it), the pull start [s], and the lag of the
-  horn behind the logged ON flag at switch-on and at switch-off [s].
+* per trace (:attr:`BenchModel.trace_groups`): the offset model's (the load-cell offset
+  [N]: it moves between pulls, the baseline before each pull measures it; the drift model
+  adds its drift [N/s], :mod:`idtool._model._offset`), then :data:`TRACE_GROUPS`: the pull
+  start [s] and the lag of the horn behind the logged ON flag at switch-on and at
+  switch-off [s].
 
 Every parameter lives on an unbounded internal scale (:mod:`idtool._model._params`).
 The noise parameters are not in ``z``: the fit estimates phi from its residuals, the
@@ -40,15 +43,16 @@ from idtool._model._bench import TraceTiming, on_friction_ratio
 from idtool._model._coupling import COUPLINGS, AbstractCoupling
 from idtool._model._laws import FRICTION_LAWS, MU, AbstractFrictionLaw
 from idtool._model._noise import DEFAULT_NOISE, NOISE_MODELS, AbstractNoise, whiten
+from idtool._model._offset import DEFAULT_OFFSET, OFFSETS, AbstractOffset
 from idtool._model._params import Param
 
 __all__ = ["TRACE_GROUPS", "BenchModel", "bench_model"]
 
-# Per-trace nuisances: name, unit, internal scale. The horn's lag behind the logged flag
-# differs at switch-on and switch-off (each is its own relay and ramp-up), and a single
-# lag leaves a visible bump in the residuals after OFF.
+# Per-trace nuisances of every model, after the offset model's: name, unit, internal
+# scale. The horn's lag behind the logged flag differs at switch-on and switch-off (each
+# is its own relay and ramp-up), and a single lag leaves a visible bump in the residuals
+# after OFF.
 TRACE_GROUPS = (
-    ("offset_n", "N", 1.0),
     ("pull_start_s", "s", 0.05),
     ("delay_on_s", "s", 0.01),
     ("delay_off_s", "s", 0.01),
@@ -56,8 +60,8 @@ TRACE_GROUPS = (
 
 
 class BenchModel(eqx.Module):
-    """The model of one dataset for one friction law, coupling law, actuator model and
-    noise model.
+    """The model of one dataset for one friction law, coupling law, actuator model,
+    load-cell offset model and noise model.
 
     Build it with :func:`bench_model`. Pure and jittable: pass it to ``jax.jit``-ed
     functions as an argument.
@@ -71,6 +75,7 @@ class BenchModel(eqx.Module):
     coupling: type[AbstractCoupling] = eqx.field(static=True)
     actuator: type[AbstractActuator] = eqx.field(static=True)
     noise: AbstractNoise = eqx.field(static=True)
+    offset: type[AbstractOffset] = eqx.field(static=True)
 
     # ------------------------------------------------------------------ parameters
     @property
@@ -79,12 +84,18 @@ class BenchModel(eqx.Module):
         return _shared_params(self.law, self.coupling, self.actuator)
 
     @property
+    def trace_groups(self) -> tuple[tuple[str, str, float], ...]:
+        """Per-trace nuisance groups (name, unit, internal scale): the offset model's,
+        then :data:`TRACE_GROUPS`."""
+        return _trace_groups(self.offset)
+
+    @property
     def params(self) -> tuple[Param, ...]:
         """Every parameter of ``z``: the shared ones, then each nuisance group's per
         trace (``offset_n[trace_id]``, ...). Outside a trace only (reads the centres)."""
         centre = np.asarray(self.nuisance_centre)
         out = list(self.shared_params)
-        for j, (group, unit, scale) in enumerate(TRACE_GROUPS):
+        for j, (group, unit, scale) in enumerate(self.trace_groups):
             out += [
                 Param(f"{group}[{tid}]", unit, "linear", centre=float(centre[j, i]), scale=scale)
                 for i, tid in enumerate(self.data.trace_ids)
@@ -100,7 +111,7 @@ class BenchModel(eqx.Module):
     def names(self) -> tuple[str, ...]:
         shared = tuple(p.name for p in self.shared_params)
         return shared + tuple(
-            f"{group}[{tid}]" for group, _, _ in TRACE_GROUPS for tid in self.data.trace_ids
+            f"{group}[{tid}]" for group, _, _ in self.trace_groups for tid in self.data.trace_ids
         )
 
     @property
@@ -116,21 +127,21 @@ class BenchModel(eqx.Module):
         """Per parameter: -1 if shared, else the trace whose residuals it alone moves."""
         n = self.data.n_traces
         return np.concatenate(
-            [np.full(self.n_shared, -1), np.tile(np.arange(n), len(TRACE_GROUPS))]
+            [np.full(self.n_shared, -1), np.tile(np.arange(n), len(self.trace_groups))]
         )
 
     def values(self, z: Float[Array, " p"]) -> dict[str, Array]:
         """Physical values: shared names map to scalars, per-trace groups to arrays."""
         k, n = self.n_shared, self.data.n_traces
         out = {p.name: p.value(z[i]) for i, p in enumerate(self.shared_params)}
-        for j, (group, _, scale) in enumerate(TRACE_GROUPS):
+        for j, (group, _, scale) in enumerate(self.trace_groups):
             out[group] = self.nuisance_centre[j] + scale * z[k + j * n : k + (j + 1) * n]
         return out
 
     def z0(self, **physical: float) -> np.ndarray:
         """Internal start vector: the data-driven start values, ``physical`` overrides
         (by name, physical units); the nuisances at their centres."""
-        z = np.zeros(self.n_shared + len(TRACE_GROUPS) * self.data.n_traces)
+        z = np.zeros(self.n_shared + len(self.trace_groups) * self.data.n_traces)
         z[: self.n_shared] = np.asarray(self.start_z)
         for i, p in enumerate(self.shared_params):
             if p.name in physical:
@@ -195,9 +206,11 @@ class BenchModel(eqx.Module):
         )
         t = jnp.asarray(d.sub_time_s).reshape(d.sub_time_s.shape + (1,) * extra)
         actuator = self.actuator.from_values(v)
-        force = actuator.force_n(
-            t, per_block(off_n), per_block(on_n), timing, per_block(v["offset_n"])
+        start = jnp.asarray(d.sub_time_s)[jnp.asarray(d.first_block), 0]  # (traces,)
+        offset = self.offset.offset_n(
+            {g: per_block(v[g]) for g, _, _ in self.offset.trace_params}, t, per_block(start)
         )
+        force = actuator.force_n(t, per_block(off_n), per_block(on_n), timing, offset)
         return force.mean(axis=1)
 
     def predict(self, z: Float[Array, " p"]) -> Float[Array, " blocks"]:
@@ -263,6 +276,10 @@ def _shared_params(
     return (*law.fit_params, MU, *coupling.fit_params, *actuator.fit_params)
 
 
+def _trace_groups(offset: type[AbstractOffset]) -> tuple[tuple[str, str, float], ...]:
+    return (*offset.trace_params, *TRACE_GROUPS)
+
+
 def _add_trailing(per_trace: ArrayLike, shift: ArrayLike, extra: int) -> Array:
     """``per_trace + shift`` with ``per_trace`` (traces,) and ``shift`` (traces,) or
     (traces, *batch): the result carries ``extra`` trailing axes."""
@@ -277,6 +294,7 @@ def bench_model(
     coupling: str | type[AbstractCoupling] = "power-limited",
     noise: str | type[AbstractNoise] = DEFAULT_NOISE,
     actuator: str | type[AbstractActuator] = DEFAULT_ACTUATOR,
+    offset: str | type[AbstractOffset] = DEFAULT_OFFSET,
 ) -> BenchModel:
     """The :class:`BenchModel` of prepared ``data``; laws and models by registered name
     or class.
@@ -289,6 +307,8 @@ def bench_model(
     coupling_cls = COUPLINGS.get(coupling)
     noise_cls = NOISE_MODELS.get(noise)
     actuator_cls = ACTUATORS.get(actuator)
+    offset_cls = OFFSETS.get(offset)
+    groups_of_trace = _trace_groups(offset_cls)
     s = start_values(data)
     shared = _shared_params(law_cls, coupling_cls, actuator_cls)
     guess = {
@@ -299,14 +319,14 @@ def bench_model(
     start_z = np.array([p.internal(guess.get(p.name, p.start)) for p in shared])
     n = data.n_traces
     centres = {"offset_n": s.offset_n, "pull_start_s": s.pull_start_s}
-    nuisance_centre = np.stack([centres.get(g, np.zeros(n)) for g, _, _ in TRACE_GROUPS])
+    nuisance_centre = np.stack([centres.get(g, np.zeros(n)) for g, _, _ in groups_of_trace])
     k = sum(p.physical for p in shared)
     groups = np.concatenate(
         [
             np.arange(n),
             np.arange(n),
             np.full(len(shared) - k, -1),
-            np.tile(np.arange(n), len(TRACE_GROUPS)),
+            np.tile(np.arange(n), len(groups_of_trace)),
         ]
     )
     return BenchModel(
@@ -318,4 +338,5 @@ def bench_model(
         coupling=coupling_cls,
         actuator=actuator_cls,
         noise=noise_cls(),
+        offset=offset_cls,
     )

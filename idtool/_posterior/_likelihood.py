@@ -10,9 +10,9 @@ nuisances enter only that trace's residuals, and the model is close to linear in
 over their posterior range, so they are integrated analytically: the whitened residuals
 are linearised in the nuisances at the fit's values, ``w(theta, eta) = w(theta, eta*)
 + J_w (eta - eta*)`` (``J`` computed once at the fit), and under a wide Gaussian prior
-(sd 100 internal units: +-100 N, +-5 s, +-1 s) the integral is Gaussian, one 4 x 4
-Cholesky per trace. For Student-t innovations the same Gaussian integral is used as a
-Laplace approximation (nuisances profiled by least squares).
+(sd 100 internal units: +-100 N, +-5 s, +-1 s, +-1 N/s) the integral is Gaussian, one
+4 x 4 (5 x 5) Cholesky per trace. For Student-t innovations the same Gaussian integral is
+used as a Laplace approximation (nuisances profiled by least squares).
 
 The noise model is the model's (:mod:`idtool._model._noise`); the sampler may swap it
 (``idtool sample --noise``).
@@ -30,7 +30,7 @@ import numpy as np
 from jax.scipy.linalg import solve_triangular
 from jaxtyping import Array
 
-from idtool._model._benchmodel import TRACE_GROUPS, BenchModel
+from idtool._model._benchmodel import BenchModel
 from idtool._model._noise import NOISE_MODELS, whiten
 from idtool._model._params import Param
 from idtool._posterior._prior import Prior
@@ -45,7 +45,7 @@ __all__ = [
     "sampled_params",
 ]
 
-NUISANCE_PRIOR_SD = 100.0  # internal units (TRACE_GROUPS scales): effectively flat
+NUISANCE_PRIOR_SD = 100.0  # internal units (trace groups' scales): effectively flat
 
 
 def sampled_params(model: BenchModel) -> tuple[Param, ...]:
@@ -60,8 +60,8 @@ class Target(eqx.Module):
 
     model: BenchModel
     nuisances: dict[str, Array]  # per-trace values (traces,) at the linearisation
-    jac_e: Array  # (blocks, 4) d prediction / d nuisance (internal units) there
-    gram: Array  # (3, traces, 4, 4): J_w^T J_w = gram[0] + phi gram[1] + phi^2 gram[2]
+    jac_e: Array  # (blocks, groups) d prediction / d nuisance (internal units) there
+    gram: Array  # (3, traces, groups, groups): J_w^T J_w = gram[0] + phi gram[1] + phi^2 gram[2]
     continues: Array  # (blocks,) the next block belongs to the same trace
     priors: tuple[Prior, ...] = eqx.field(static=True)
 
@@ -98,10 +98,10 @@ def build_target(
     first = np.asarray(d.first)
     continues = np.zeros(d.n_blocks, bool)
     continues[:-1] = ~first[1:]
-    n, g = d.n_traces, len(TRACE_GROUPS)
+    n, g = d.n_traces, len(model.trace_groups)
     target = Target(
         model=model,
-        nuisances={group: jnp.asarray(v[group]) for group, _, _ in TRACE_GROUPS},
+        nuisances={group: jnp.asarray(v[group]) for group, _, _ in model.trace_groups},
         jac_e=jnp.zeros((d.n_blocks, g)),
         gram=jnp.zeros((3, n, g, g)),
         continues=jnp.asarray(continues),
@@ -127,7 +127,7 @@ def _nuisance_jacobian(shared: dict, target: Target) -> Array:
         return predict_blocks(shared, target, nuisances)
 
     cols = []
-    for group, _, scale in TRACE_GROUPS:
+    for group, _, scale in target.model.trace_groups:
         tangents = {
             k: jnp.full_like(x, scale) if k == group else jnp.zeros_like(x)
             for k, x in primals.items()
@@ -137,7 +137,8 @@ def _nuisance_jacobian(shared: dict, target: Target) -> Array:
 
 
 def _gram(jac: np.ndarray, first: np.ndarray, trace: np.ndarray, n_traces: int) -> np.ndarray:
-    """Per trace, the whitened nuisance Gram matrix as a quadratic in phi (3, traces, 4, 4).
+    """Per trace, the whitened nuisance Gram matrix as a quadratic in phi
+    (3, traces, groups, groups).
 
     ``(J_t - phi J_{t-1})`` within a trace and ``sqrt(1 - phi^2) J_t`` at its first block,
     expanded, so the sampler never re-whitens J.
@@ -187,11 +188,11 @@ def predict_blocks(v: dict, target: Target, nuisances: dict[str, Array] | None =
 def marginal_loglik_batch(e: Array, v: dict, target: Target) -> tuple[Array, Array]:
     """Log-likelihood of residuals ``e`` (walkers, blocks; model - data) with the
     nuisances integrated out (module docstring), (walkers,); and the nuisance shift at
-    its conditional mode, (walkers, traces, 4). ``v`` maps names to (walkers,) arrays.
+    its conditional mode, (walkers, traces, groups). ``v`` maps names to (walkers,) arrays.
 
     With ``w = L e`` the whitened residuals and ``J_w = L J``: ``h = J_w^T w = J^T (L^T w)``
     and ``J_w^T J_w`` comes precomputed (:func:`_gram`), so a call costs two passes over
-    the blocks (walkers as the fastest axis) and one 4 x 4 Cholesky per trace.
+    the blocks (walkers as the fastest axis) and one groups x groups Cholesky per trace.
     """
     t = target
     noise = t.model.noise
@@ -204,9 +205,9 @@ def marginal_loglik_batch(e: Array, v: dict, target: Target) -> tuple[Array, Arr
     lt_w = jnp.where(t.first[:, None], head * w, w) - phi * nxt
     block_trace = jnp.asarray(t.model.data.block_trace)
     h = jax.ops.segment_sum(t.jac_e[:, :, None] * lt_w[:, None, :], block_trace, n_traces)
-    h = jnp.moveaxis(h, -1, 0)  # (walkers, traces, 4)
+    h = jnp.moveaxis(h, -1, 0)  # (walkers, traces, groups)
 
-    def per_walker(x):  # (walkers,) -> broadcast against (walkers, traces, 4, 4)
+    def per_walker(x):  # (walkers,) -> broadcast against (walkers, traces, groups, groups)
         return x[:, None, None, None]
 
     g = t.gram[0] + per_walker(phi) * t.gram[1] + per_walker(phi**2) * t.gram[2]

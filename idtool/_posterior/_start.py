@@ -27,7 +27,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from idtool._errors import IdtoolError
-from idtool._model._benchmodel import TRACE_GROUPS
 from idtool._model._noise import whiten
 from idtool._posterior._likelihood import (
     Target,
@@ -153,7 +152,7 @@ def find_start(fit: Any, target: Target, rebuild: Callable[[np.ndarray], Target]
         shift = np.asarray(marginal_loglik(e, v, target)[1])
         z_lin[:k] = best_theta[:k]
         n = fit.model.data.n_traces
-        for j in range(len(TRACE_GROUPS)):
+        for j in range(len(fit.model.trace_groups)):
             z_lin[k + j * n : k + (j + 1) * n] += shift[:, j]
         target = rebuild(z_lin)
         best_theta, best_lp = _polish(best_theta, target)

@@ -10,7 +10,6 @@ import numpy as np
 
 from idtool._fit._fit import Estimate, FitResult
 from idtool._fit._run import FitRun
-from idtool._model._benchmodel import TRACE_GROUPS
 from idtool._provenance import provenance
 from idtool._version import __version__
 
@@ -57,7 +56,7 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
                     "estimate": float(r.friction_ratio[i]),
                     "std_error": float(r.friction_ratio_se[i]),
                 },
-                **{key: _est(r.estimates[f"{key}[{tid}]"]) for key, _, _ in TRACE_GROUPS},
+                **{key: _est(r.estimates[f"{key}[{tid}]"]) for key, _, _ in r.model.trace_groups},
             }
         )
     var = r.variability
@@ -81,6 +80,10 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
         "actuator": {
             "name": r.model.actuator.name,
             "parameters": [p.name for p in r.model.actuator.fit_params],
+        },
+        "offset": {
+            "name": r.model.offset.name,
+            "trace_parameters": [name for name, _, _ in r.model.offset.trace_params],
         },
         "aic": r.aic,
         "bic": r.bic,
@@ -119,6 +122,7 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
             for o in r.optima
         ],
         "warnings": r.warnings,
+        "notes": r.notes,
         "lm_steps": r.lm_steps,
         "jacobian_evaluations": r.jacobian_evaluations,
         "dataset": {"name": d.name, "sha256": d.sha256, "path": dataset_path},
@@ -185,7 +189,7 @@ def fit_report(run: FitRun) -> str:
         f"    dataset      {d.name} (sha256 {d.sha256[:12]}...), {d.n_traces} traces, "
         f"{d.n_blocks} block means of {d.block_size} samples",
         f"    model        {r.model.law.name} friction, {r.model.coupling.name} coupling, "
-        f"{r.model.actuator.name} actuator",
+        f"{r.model.actuator.name} actuator, {r.model.offset.name} load-cell offset",
         f"    choice       {run.reason}",
         f"    noise        {r.model.noise.description} ({r.model.noise.name}), phi = {r.phi:.3f}, "
         f"innovation sigma = {r.sigma_n:.3g} N",
@@ -243,6 +247,9 @@ def fit_report(run: FitRun) -> str:
         )
     lines.append("[[Warnings]]")
     lines += [f"    - {w}" for w in r.warnings] or ["    none"]
+    if r.notes:
+        lines.append("[[Notes]]")
+        lines += [f"    - {n}" for n in r.notes]
     return "\n".join(lines)
 
 

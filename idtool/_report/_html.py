@@ -228,6 +228,10 @@ def write_report(fit_folder: str | Path) -> Path:
             if warnings
             else "<p>none</p>"
         )
+        if doc.get("notes"):
+            sec["Notes"] = (
+                "<ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in doc["notes"]) + "</ul>"
+            )
         prov = {
             "dataset": doc["dataset"],
             "fit command": doc["command"],
