@@ -2,6 +2,7 @@
 a headless Chromium screenshot where Chromium is installed (CI installs it)."""
 
 import base64
+import html
 import io
 import json
 import re
@@ -73,6 +74,13 @@ def test_report_has_every_section_and_decodable_images(fitted):
         assert pixels.ndim == 3 and min(pixels.shape[:2]) > 100
         assert np.ptp(pixels) > 0  # not a blank image
     assert "http://" not in page and "https://" not in page  # opens offline
+    # the fit's notes (facts of the design) under the warnings, apart from them
+    doc = json.loads((fitted / "fit.json").read_text())
+    assert doc["notes"], "this design (one ON duration) should give the fit a note"
+    section = page.split("<h2>Warnings</h2>")[1].split("<h2>")[0]
+    notes = section.split("<h3>Notes</h3>")[1]
+    for note in doc["notes"]:
+        assert html.escape(note) in notes and note not in doc["warnings"]
     assert "no posterior" in page.lower()  # says what to run, rather than hiding it
 
 

@@ -221,9 +221,10 @@ def fit_report(run: FitRun) -> str:
     lines += [f"    C({a}, {b}) = {c:+.3f}" for _, a, b, c in sorted(pairs, reverse=True)]
     lines.append("[[Model comparison]]  (ranked by BIC)")
     best = run.ranking[0][1].bic
+    width = max(len(key) for key, _ in run.ranking)  # law/coupling/actuator/offset
     for key, c in run.ranking:
         lines.append(
-            f"    {key:24s} AIC {c.aic:10.1f}  BIC {c.bic:10.1f}  dBIC {c.bic - best:7.1f}"
+            f"    {key:{width}s}  AIC {c.aic:10.1f}  BIC {c.bic:10.1f}  dBIC {c.bic - best:7.1f}"
         )
     lines.append("[[Friction ratio at each operating point]]")
     seen = set()

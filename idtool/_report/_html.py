@@ -228,9 +228,11 @@ def write_report(fit_folder: str | Path) -> Path:
             if warnings
             else "<p>none</p>"
         )
-        if doc.get("notes"):
-            sec["Notes"] = (
-                "<ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in doc["notes"]) + "</ul>"
+        if doc.get("notes"):  # facts of the design, not doubts: below the warnings
+            sec["Warnings"] += (
+                "<h3>Notes</h3><ul>"
+                + "".join(f"<li>{html.escape(n)}</li>" for n in doc["notes"])
+                + "</ul>"
             )
         prov = {
             "dataset": doc["dataset"],
