@@ -112,17 +112,20 @@ class Fit:
 
     @property
     def warnings(self) -> list[str]:
-        if isinstance(self._state, FitResult):
-            return list(self._state.warnings)
-        return list(self._state.doc.get("warnings", []))
+        return self._sentences("warnings")
 
     @property
     def notes(self) -> list[str]:
         """What the data let the fit measure (one trace per operating point, ON windows
         too short to settle): facts for the report, not doubts (:attr:`warnings`)."""
+        return self._sentences("notes")
+
+    def _sentences(self, key: str) -> list[str]:
+        """The fit's ``warnings`` or ``notes``: in memory, or from ``fit.json`` (same key;
+        fits written before notes existed have none)."""
         if isinstance(self._state, FitResult):
-            return list(self._state.notes)
-        return list(self._state.doc.get("notes", []))
+            return list(getattr(self._state, key))
+        return list(self._state.doc.get(key, []))
 
     @property
     def result(self) -> FitResult:

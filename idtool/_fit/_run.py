@@ -116,8 +116,8 @@ def fit_dataset(
                 )
                 nested = nested or fit
             base = min(group.values(), key=lambda f: f.bic)
+            ac = base.model.actuator.name
             for of in offsets[1:]:
-                ac = base.model.actuator.name
                 group[_key(lw, cp, ac, of)] = fit_model(
                     data, lw, cp, seed, n_starts, noise, ac, start_from=base, offset=of
                 )
