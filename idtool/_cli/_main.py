@@ -48,21 +48,30 @@ def _enable_compilation_cache() -> None:
 
     Compilation is most of the time to a first result of a short command. The cache
     lives in ``$IDTOOL_CACHE_DIR`` (default ``~/.cache/idtool/jax``); set it to an empty
-    string to disable it.
+    string to disable it. Set through JAX's environment variables, so a command that
+    never computes (``validate``, ``--help``) does not import JAX; the configuration
+    directly where JAX is loaded already (``main`` called from Python).
     """
     import os
 
-    import jax
-
     path = os.environ.get("IDTOOL_CACHE_DIR", os.path.expanduser("~/.cache/idtool/jax"))
-    if path:
-        jax.config.update("jax_compilation_cache_dir", path)
+    if not path:
+        return
+    settings = {
+        "jax_compilation_cache_dir": path,
         # Every program, however small: two dozen of 20-30 ms each were recompiled on
         # every run below the default threshold (0.6 s of a warm fit).
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+        "jax_persistent_cache_min_compile_time_secs": 0.0,
         # XLA's own autotuning caches put the cache folder's path into the compile
         # options, so the key of the same program changed with IDTOOL_CACHE_DIR.
-        jax.config.update("jax_persistent_cache_enable_xla_caches", "none")
+        "jax_persistent_cache_enable_xla_caches": "none",
+    }
+    jax = sys.modules.get("jax")
+    for name, value in settings.items():
+        if jax is not None:
+            jax.config.update(name, value)
+        else:
+            os.environ[name.upper()] = str(value)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
