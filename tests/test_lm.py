@@ -11,8 +11,10 @@ import idtool
 from idtool._data._blocks import prepare_fit_data
 from idtool._fit._lm import (
     ColouredJacobian,
+    ColouredLevenbergMarquardt,
     coloured_equations,
     levenberg_marquardt,
+    levenberg_marquardt_loop,
     normal_equations,
 )
 from idtool._model._benchmodel import bench_model
@@ -139,8 +141,8 @@ def test_max_steps_stops_the_loop_and_says_not_converged():
 
 
 def test_lm_matches_optimistix_levenberg_marquardt():
-    """Same optimum as optimistix's LevenbergMarquardt (dense Jacobians), the solver
-    this module replaces in the fit."""
+    """Same optimum as optimistix's own LevenbergMarquardt (dense Jacobians, QR), which
+    the coloured solver replaces in the fit."""
     import optimistix as optx
 
     fn, structure = decay_problem(seed=3)
@@ -150,3 +152,44 @@ def test_lm_matches_optimistix_levenberg_marquardt():
         lambda z, _: fn(z), optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12), z0, max_steps=200
     )
     np.testing.assert_allclose(ours.z, ref.value, rtol=1e-5, atol=1e-7)
+
+
+def test_the_fit_runs_through_optimistix(monkeypatch):
+    """levenberg_marquardt is optimistix.least_squares with the coloured solver."""
+    import optimistix as optx
+
+    calls = []
+    real = optx.least_squares
+
+    def spy(fn, solver, *args, **kw):
+        calls.append(solver)
+        return real(fn, solver, *args, **kw)
+
+    monkeypatch.setattr(optx, "least_squares", spy)
+    fn, structure = decay_problem()
+    z0 = jnp.array([0.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+    out = levenberg_marquardt(coloured_equations(fn, structure), z0, 1.0, jnp.ones(7, bool), 100)
+    assert bool(out.converged)
+    assert len(calls) == 1 and isinstance(calls[0], ColouredLevenbergMarquardt)
+
+
+@pytest.mark.parametrize("max_steps", [3, 100])
+def test_optimistix_solver_takes_the_reference_loops_iterates(max_steps):
+    """The optimistix-driven solver and the plain while-loop (the reference the fit
+    benchmark times it against) run the same update: same steps, linearisations and
+    end point, to rounding (the closure-converted residual function may fuse
+    differently: 1e-12 on the internal scale, where standard errors are ~1e-2)."""
+    data = prepare_fit_data(idtool.load_dataset(idtool.example_dataset_path()), periods_per_block=2)
+    model = bench_model(data, "dahl", "power-limited")
+    z0 = jnp.asarray(model.z0())
+    mask = jnp.ones(z0.size, bool)
+    outs = [
+        jax.jit(lambda m, z, drv=drv: drv(m.normal_equations, z, 0.2, mask, max_steps))(model, z0)
+        for drv in (levenberg_marquardt, levenberg_marquardt_loop)
+    ]
+    ours, ref = outs
+    assert int(ours.steps) == int(ref.steps) and int(ours.n_jacobians) == int(ref.n_jacobians)
+    assert bool(ours.converged) == bool(ref.converged) == (max_steps == 100)
+    np.testing.assert_allclose(ours.z, ref.z, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(ours.loss, ref.loss, rtol=1e-12)
+    np.testing.assert_allclose(ours.jtj, ref.jtj, rtol=1e-10, atol=1e-10 * float(jnp.max(ref.jtj)))

@@ -6,11 +6,13 @@ depend on its own nuisances only. The Jacobian is then block-arrow shaped: of it
 columns, the per-trace ones touch disjoint rows. Columns that never share a row can be
 given one colour and probed by a single forward-mode product (Curtis, Powell and Reid
 1974), so a Jacobian costs ``n_shared + n_slots`` JVPs (10 on the example) instead of
-one per parameter (102); :meth:`idtool._model._benchmodel.FitModel.normal_equations` goes to 8 by
-differentiating the bench model in its per-trace levels. optimistix's
+one per parameter (102); :meth:`idtool.BenchModel.normal_equations` goes to 8 by
+differentiating the bench model in its per-trace levels. optimistix's own
 LevenbergMarquardt builds the dense Jacobian column by column (about 14x the work per
-step here, benchmarks/bench_fit.py); this module keeps the classical algorithm
-(Moré-scaled damping, Nielsen's update of the damping) around the coloured Jacobian.
+step here, benchmarks/bench_fit.py); :class:`ColouredLevenbergMarquardt` is an optimistix
+least-squares solver that keeps the classical algorithm (Moré-scaled damping, Nielsen's
+update of the damping) around the coloured Jacobian, and :func:`levenberg_marquardt` runs
+it through :func:`optimistix.least_squares`.
 
 The normal equations ``J^T J`` and ``J^T r`` are assembled from per-trace sums of the
 coloured columns, never from the dense Jacobian. Everything is pure JAX and jittable;
@@ -31,13 +33,16 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 __all__ = [
     "ColouredJacobian",
+    "ColouredLevenbergMarquardt",
     "LMResult",
     "coloured_equations",
     "levenberg_marquardt",
+    "levenberg_marquardt_loop",
     "normal_equations",
 ]
 
@@ -152,50 +157,24 @@ def coloured_equations(
     return equations
 
 
-def levenberg_marquardt(
-    equations: Callable[[Array, Any], tuple[Array, Array, Array, Any]],
-    z0: Float[Array, " p"],
-    args: Any,
-    mask: Bool[Array, " p"],
-    max_steps: int | Array = 100,
-    tol: float = 1e-8,
-    max_step: float = 5.0,
-) -> LMResult:
-    """Minimise ``0.5 |r(z)|^2`` over the parameters in ``mask``.
+class _Linearisation(eqx.Module):
+    """What one linearisation gives the update: residuals, normal equations (their
+    masked versions too) and the caller's auxiliary output."""
 
-    ``equations(z, args) -> (r, J^T J, J^T r, aux)`` linearises the residuals at ``z``
-    (:func:`coloured_equations` builds it from a residual function and its sparsity);
-    ``aux`` (any pytree it computes on the way) is returned for the final ``z``.
+    r: Array
+    jtj: Array
+    jtr: Array
+    a: Array
+    g: Array
+    aux: Any
 
-    Convergence: the Gauss-Newton decrement ``g^T (J^T J)^-1 g`` (twice the decrease a
-    full Gauss-Newton step still promises) falls below ``tol`` times the residual
-    variance ``|r|^2 / n``: the optimum is then within ``sqrt(tol)`` standard errors in
-    every direction, whatever the parameters' scales and correlations. Stops early
-    after ``max_steps`` iterations (a traced value: no recompilation) or if the damping
-    explodes (no downhill step exists in floating point).
 
-    No step moves a parameter by more than ``max_step`` on the internal scale.
-    """
-    z0 = jnp.asarray(z0, float)
-    p = z0.size
-
-    def linearise(z):
-        r, jtj, jtr, aux = equations(z, args)
-        return (r, jtj, jtr, *_masked(jtj, jtr, mask), aux)
-
-    def converged(a, g, loss, n):
-        # Jitter keeps a rank-deficient J^T J solvable; it only affects flat directions.
-        jitter = 1e-12 * jnp.max(jnp.diag(a)) * jnp.eye(p)
-        gn = jnp.linalg.solve(a + jitter, g)
-        return jnp.dot(g, gn) <= tol * 2.0 * loss / n
-
-    # Every iteration linearises at the trial point, whether or not it is then accepted:
-    # the model appears once in the compiled loop (compile time is most of the time to a
-    # first fit), at the price of a wasted Jacobian per rejected step (about 1 in 10).
-    shapes = jax.eval_shape(linearise, z0)
-    n = shapes[0].shape[0]
-    state = dict(
-        aux=jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), shapes[-1]),
+def _initial_state(z0: Array, lin: Any) -> dict[str, Any]:
+    """The iteration's state before the first linearisation (``lin``: shapes of a
+    :class:`_Linearisation`); the first update accepts ``z0`` whatever its loss."""
+    p, n = z0.size, lin.r.shape[0]
+    return dict(
+        aux=jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), lin.aux),
         z=z0,
         loss=jnp.asarray(jnp.inf),
         r=jnp.zeros(n),
@@ -215,59 +194,128 @@ def levenberg_marquardt(
         failed=jnp.asarray(False),
     )
 
-    def cond(s):
-        return s["first"] | (~s["done"] & ~s["failed"] & (s["steps"] < max_steps))
 
-    def body(s):
-        r, jtj, jtr, a, g, aux = linearise(s["trial"])
-        loss_new = 0.5 * jnp.dot(r, r)
-        gain = (s["loss"] - loss_new) / jnp.maximum(s["predicted"], 1e-300)
-        accept = s["first"] | (jnp.isfinite(loss_new) & (gain > 0.0))
+def _update(
+    s: dict[str, Any], lin: _Linearisation, mask: Array, tol: float, max_step: float
+) -> dict[str, Any]:
+    """One Levenberg-Marquardt iteration from the linearisation ``lin`` at the trial
+    point ``s["trial"]``: accept or reject it, adapt the damping (Nielsen), and set the
+    next trial point (Moré-scaled damped Gauss-Newton step)."""
+    p = s["z"].size
+    loss_new = 0.5 * jnp.dot(lin.r, lin.r)
+    gain = (s["loss"] - loss_new) / jnp.maximum(s["predicted"], 1e-300)
+    accept = s["first"] | (jnp.isfinite(loss_new) & (gain > 0.0))
 
-        def pick(new, old):
-            return jnp.where(accept, new, old)
+    def pick(new, old):
+        return jnp.where(accept, new, old)
 
-        z, loss, r = pick(s["trial"], s["z"]), pick(loss_new, s["loss"]), pick(r, s["r"])
-        jtj, jtr, a, g = pick(jtj, s["jtj"]), pick(jtr, s["jtr"]), pick(a, s["a"]), pick(g, s["g"])
-        aux = jax.tree.map(pick, aux, s["aux"])
-        shrink = jnp.where(s["first"], 1.0, jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3))
-        damping = jnp.where(accept, s["damping"] * shrink, s["damping"] * s["nu"])
-        nu = jnp.where(accept, 2.0, 2.0 * s["nu"])
+    z, loss, r = pick(s["trial"], s["z"]), pick(loss_new, s["loss"]), pick(lin.r, s["r"])
+    jtj, jtr = pick(lin.jtj, s["jtj"]), pick(lin.jtr, s["jtr"])
+    a, g = pick(lin.a, s["a"]), pick(lin.g, s["g"])
+    aux = jax.tree.map(pick, lin.aux, s["aux"])
+    shrink = jnp.where(s["first"], 1.0, jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3))
+    damping = jnp.where(accept, s["damping"] * shrink, s["damping"] * s["nu"])
+    nu = jnp.where(accept, 2.0, 2.0 * s["nu"])
 
-        # The next trial step. Moré's scaling: damp each parameter in proportion to
-        # the largest curvature it has shown so far. A running maximum, so that a
-        # direction that turns flat (a bounded parameter saturating) cannot take an
-        # unbounded step.
-        scale = jnp.maximum(s["scale"], jnp.diag(a))
-        scale = jnp.maximum(scale, 1e-12 * jnp.max(scale))
-        h = jnp.linalg.solve(a + damping * jnp.diag(scale), -g)
-        h = jnp.where(mask, h, 0.0)
-        # The internal scale is of order one (a bounded parameter spans its range
-        # within |z| < 10): a longer step only happens along a direction gone flat,
-        # which the damping cannot hold, so it is cut back.
-        h = h * jnp.minimum(1.0, max_step / jnp.maximum(jnp.max(jnp.abs(h)), 1e-300))
-        return dict(
-            aux=aux,
-            z=z,
-            loss=loss,
-            r=r,
-            jtj=jtj,
-            jtr=jtr,
-            a=a,
-            g=g,
-            trial=z + h,
-            predicted=-jnp.dot(g, h) - 0.5 * jnp.dot(h, a @ h),
-            first=jnp.asarray(False),
-            damping=damping,
-            nu=nu,
-            scale=scale,
-            steps=s["steps"] + jnp.where(s["first"], 0, 1),
-            n_jac=s["n_jac"] + 1,
-            done=accept & converged(a, g, loss, r.size),
-            failed=~(damping < 1e30),
-        )
+    # The next trial step. Moré's scaling: damp each parameter in proportion to the
+    # largest curvature it has shown so far. A running maximum, so that a direction
+    # that turns flat (a bounded parameter saturating) cannot take an unbounded step.
+    scale = jnp.maximum(s["scale"], jnp.diag(a))
+    scale = jnp.maximum(scale, 1e-12 * jnp.max(scale))
+    h = jnp.linalg.solve(a + damping * jnp.diag(scale), -g)
+    h = jnp.where(mask, h, 0.0)
+    # The internal scale is of order one (a bounded parameter spans its range within
+    # |z| < 10): a longer step only happens along a direction gone flat, which the
+    # damping cannot hold, so it is cut back.
+    h = h * jnp.minimum(1.0, max_step / jnp.maximum(jnp.max(jnp.abs(h)), 1e-300))
+    # Converged when the Gauss-Newton decrement is below tol times the residual
+    # variance; jitter keeps a rank-deficient J^T J solvable (flat directions only).
+    gn = jnp.linalg.solve(a + 1e-12 * jnp.max(jnp.diag(a)) * jnp.eye(p), g)
+    return dict(
+        aux=aux,
+        z=z,
+        loss=loss,
+        r=r,
+        jtj=jtj,
+        jtr=jtr,
+        a=a,
+        g=g,
+        trial=z + h,
+        predicted=-jnp.dot(g, h) - 0.5 * jnp.dot(h, a @ h),
+        first=jnp.asarray(False),
+        damping=damping,
+        nu=nu,
+        scale=scale,
+        steps=s["steps"] + jnp.where(s["first"], 0, 1),
+        n_jac=s["n_jac"] + 1,
+        done=accept & (jnp.dot(g, gn) <= tol * 2.0 * loss / r.size),
+        failed=~(damping < 1e30),
+    )
 
-    s = jax.lax.while_loop(cond, body, state)
+
+def _linearise(fn: Callable, z: Array, args: Any, mask: Array) -> _Linearisation:
+    r, (jtj, jtr, aux) = fn(z, args)
+    a, g = _masked(jtj, jtr, mask)
+    return _Linearisation(r=r, jtj=jtj, jtr=jtr, a=a, g=g, aux=aux)
+
+
+class ColouredLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
+    """Levenberg-Marquardt as an optimistix least-squares solver, for residual functions
+    that linearise themselves from a coloured Jacobian.
+
+    ``fn(z, args)`` returns the residuals ``r`` and, as its auxiliary output,
+    ``(J^T J, J^T r, aux)`` at ``z`` (:func:`coloured_equations` makes such a function
+    from plain residuals and their sparsity; the bench model's
+    :meth:`idtool.BenchModel.normal_equations` goes through the per-trace levels). So
+    one evaluation of ``fn`` per iteration is the whole linearisation: the residuals
+    and one JVP per colour, never a dense Jacobian. optimistix drives the loop
+    (:func:`optimistix.least_squares`); each iteration is :func:`_update`.
+
+    ``options``: ``mask`` (bool, per parameter: which ones move) and ``max_steps`` (a
+    traced step budget: one compiled program serves every budget). Attributes:
+    ``rtol``, the convergence threshold on the Gauss-Newton decrement ``g^T (J^T J)^-1
+    g`` relative to the residual variance ``|r|^2 / n`` (the optimum is then within
+    ``sqrt(rtol)`` standard errors in every direction); ``max_step``, the longest step
+    on the internal scale. ``atol`` and ``norm`` are optimistix's interface and unused:
+    the decrement is scale-free.
+    """
+
+    rtol: float = 1e-8
+    atol: float = 0.0
+    norm: Callable = optx.max_norm
+    max_step: float = 5.0
+
+    def init(self, fn, y, args, options, f_struct, aux_struct, tags):
+        jtj, jtr, aux = aux_struct
+        lin = _Linearisation(r=f_struct, jtj=jtj, jtr=jtr, a=jtj, g=jtr, aux=aux)
+        return _initial_state(jnp.asarray(y), lin)
+
+    def step(self, fn, y, args, options, state, tags):
+        lin = _linearise(fn, state["trial"], args, options["mask"])
+        state = _update(state, lin, options["mask"], self.rtol, self.max_step)
+        return state["z"], state, (state["jtj"], state["jtr"], state["aux"])
+
+    def terminate(self, fn, y, args, options, state, tags):
+        budget = state["steps"] >= options["max_steps"]
+        stop = ~state["first"] & (state["done"] | state["failed"] | budget)
+        return stop, optx.RESULTS.successful
+
+    def postprocess(self, fn, y, aux, args, options, state, tags, result):
+        return y, aux, {}
+
+
+def _solver_fn(equations: Callable) -> Callable:
+    """``equations`` as the residual function the solver takes: ``(r, (J^T J, J^T r,
+    aux))``."""
+
+    def fn(z, a):
+        r, jtj, jtr, aux = equations(z, a)
+        return r, (jtj, jtr, aux)
+
+    return fn
+
+
+def _result(s: dict[str, Any]) -> LMResult:
     return LMResult(
         z=s["z"],
         loss=s["loss"],
@@ -279,3 +327,71 @@ def levenberg_marquardt(
         n_jacobians=s["n_jac"],
         converged=s["done"],
     )
+
+
+def levenberg_marquardt(
+    equations: Callable[[Array, Any], tuple[Array, Array, Array, Any]],
+    z0: Float[Array, " p"],
+    args: Any,
+    mask: Bool[Array, " p"],
+    max_steps: int | Array = 100,
+    tol: float = 1e-8,
+    max_step: float = 5.0,
+) -> LMResult:
+    """Minimise ``0.5 |r(z)|^2`` over the parameters in ``mask``, with optimistix
+    (:class:`ColouredLevenbergMarquardt` in :func:`optimistix.least_squares`).
+
+    ``equations(z, args) -> (r, J^T J, J^T r, aux)`` linearises the residuals at ``z``
+    (:func:`coloured_equations` builds it from a residual function and its sparsity);
+    ``aux`` (any pytree it computes on the way) is returned for the final ``z``.
+
+    Convergence: the Gauss-Newton decrement ``g^T (J^T J)^-1 g`` (twice the decrease a
+    full Gauss-Newton step still promises) falls below ``tol`` times the residual
+    variance ``|r|^2 / n``: the optimum is then within ``sqrt(tol)`` standard errors in
+    every direction, whatever the parameters' scales and correlations. Stops early
+    after ``max_steps`` iterations (a traced value: no recompilation) or if the damping
+    explodes (no downhill step exists in floating point).
+
+    No step moves a parameter by more than ``max_step`` on the internal scale. Every
+    iteration linearises at the trial point, whether or not it is then accepted: the
+    model appears once in the compiled loop (compile time is most of the time to a
+    first fit), at the price of a wasted Jacobian per rejected step (about 1 in 10).
+    """
+
+    solution: optx.Solution = optx.least_squares(
+        _solver_fn(equations),
+        ColouredLevenbergMarquardt(rtol=tol, max_step=max_step),
+        jnp.asarray(z0, float),
+        args,
+        options={"mask": jnp.asarray(mask), "max_steps": jnp.asarray(max_steps)},
+        has_aux=True,
+        max_steps=None,  # the budget is the traced option above
+        throw=False,
+    )
+    return _result(solution.state)
+
+
+def levenberg_marquardt_loop(
+    equations: Callable[[Array, Any], tuple[Array, Array, Array, Any]],
+    z0: Float[Array, " p"],
+    args: Any,
+    mask: Bool[Array, " p"],
+    max_steps: int | Array = 100,
+) -> LMResult:
+    """:func:`levenberg_marquardt` (default tolerances) driven by a plain
+    ``lax.while_loop`` instead of optimistix: the same iterations (:func:`_update`), the
+    reference that ``benchmarks/bench_fit.py`` and ``tests/test_lm.py`` compare the
+    optimistix solver with (time per step and identical iterates)."""
+    solver = ColouredLevenbergMarquardt()
+    fn = _solver_fn(equations)
+    z0 = jnp.asarray(z0, float)
+    lin = jax.eval_shape(lambda z: _linearise(fn, z, args, mask), z0)
+
+    def cond(s):
+        return s["first"] | (~s["done"] & ~s["failed"] & (s["steps"] < max_steps))
+
+    def body(s):
+        lin = _linearise(fn, s["trial"], args, mask)
+        return _update(s, lin, mask, solver.rtol, solver.max_step)
+
+    return _result(jax.lax.while_loop(cond, body, _initial_state(z0, lin)))

@@ -2,7 +2,7 @@
 
 1. The noise parameters start from the fit's residuals (sigma from the whitened
    residuals, phi from the fit, nu = 10), with their asymptotic standard errors.
-2. The log-posterior is maximised (L-BFGS on its JAX gradient) from the fit's optimum
+2. The log-posterior is maximised (optimistix's BFGS on its JAX gradient) from the fit's optimum
    and from each other optimum of the fit's multi-start with a residual sum of squares
    within ``RSS_FACTOR`` of the best. A fit can stop in a local
    optimum (its multi-start ranks basins with the nuisances at their start values):
@@ -25,6 +25,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 
 from idtool._errors import IdtoolError
 from idtool._model._noise import whiten
@@ -86,20 +87,28 @@ def _noise_start(fit: Any, target: Target) -> tuple[list[float], list[float]]:
     return start, sd
 
 
+@jax.jit
+def _maximise(theta, target):
+    """The log-posterior's maximum from ``theta``: optimistix's BFGS on its JAX gradient
+    (a point outside the prior's support has log-posterior -inf: the backtracking line
+    search rejects it like any other uphill step)."""
+
+    def loss(th, tg):
+        return -log_posterior(th, tg)
+
+    sol: optx.Solution = optx.minimise(
+        loss, optx.BFGS(rtol=1e-10, atol=1e-8), theta, target, max_steps=500, throw=False
+    )
+    return sol.value, -loss(sol.value, target)
+
+
 def _polish(theta: np.ndarray, target: Target) -> tuple[np.ndarray, float]:
-    from scipy.optimize import minimize
-
-    def fun(x):
-        v, g = _neg_value_and_grad(jnp.asarray(x), target)
-        v, g = float(v), np.asarray(g)
-        if not (np.isfinite(v) and np.all(np.isfinite(g))):
-            return 1e300, np.zeros_like(g)
-        return v, g
-
-    if fun(theta)[0] >= 1e300:
+    """The mode reached from ``theta`` (:func:`_maximise`) and its log-posterior; a
+    start outside the support stays where it is, at -inf."""
+    if not np.isfinite(float(_neg_value_and_grad(jnp.asarray(theta), target)[0])):
         return theta, -np.inf
-    res = minimize(fun, theta, jac=True, method="L-BFGS-B", options={"maxiter": 500})
-    return np.asarray(res.x), -float(res.fun)
+    mode, value = _maximise(jnp.asarray(theta), target)
+    return np.asarray(mode), float(value)
 
 
 def _other_optima(fit: Any) -> list[tuple[str, np.ndarray]]:
