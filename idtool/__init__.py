@@ -53,6 +53,7 @@ _LAZY = {
     "AbstractCoupling": "idtool._model._coupling",
     "COUPLINGS": "idtool._model._coupling",
     "ConstantCoupling": "idtool._model._coupling",
+    "ExponentialCoupling": "idtool._model._coupling",
     "PowerLimitedCoupling": "idtool._model._coupling",
     "AbstractFrictionLaw": "idtool._model._laws",
     "Coulomb": "idtool._model._laws",
@@ -116,6 +117,7 @@ __all__ = [
     "DriftingOffset",
     "EnergyBalance",
     "Estimate",
+    "ExponentialCoupling",
     "Fit",
     "IdtoolError",
     "LagActuator",
@@ -182,6 +184,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
         COUPLINGS,
         AbstractCoupling,
         ConstantCoupling,
+        ExponentialCoupling,
         PowerLimitedCoupling,
     )
     from idtool._model._laws import FRICTION_LAWS, AbstractFrictionLaw, Coulomb, Dahl, LuGre

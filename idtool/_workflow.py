@@ -120,6 +120,17 @@ class Fit:
         too short to settle): facts for the report, not doubts (:attr:`warnings`)."""
         return self._sentences("notes")
 
+    @property
+    def coupling_laws(self) -> dict[str, dict[str, float | str]]:
+        """Each fitted coupling law (best first): its best candidate model's ``key``,
+        ``bic``, ``aic`` and Akaike/Schwarz weights (``bic_weight``, ``aic_weight``):
+        several with ``coupling="auto"``, else the one law at weight 1. In memory or
+        from ``fit.json``."""
+        if self.run is not None:
+            return {n: w.to_dict() for n, w in self.run.coupling_weights.items()}
+        doc = self._state.doc if isinstance(self._state, StoredFit) else {}
+        return {w["law"]: w for w in doc.get("coupling_laws", [])}
+
     def _sentences(self, key: str) -> list[str]:
         """The fit's ``warnings`` or ``notes``: in memory, or from ``fit.json`` (same key;
         fits written before notes existed have none)."""

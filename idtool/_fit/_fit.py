@@ -253,8 +253,9 @@ def fit_model(
 ) -> FitResult:
     """Fit one law, coupling, actuator and load-cell offset model to prepared data; see
     the module docstring. ``start_from``: a fit of a model this one nests (the slope
-    actuator for the lag one, the constant offset for the drifting one): its optimum is
-    the start, with no multi-start (same basin)."""
+    actuator for the lag one, the constant offset for the drifting one, the constant
+    coupling for a saturating one): its optimum is the start, the new parameters where
+    this model reduces to that one (:attr:`Param.nested_at`), with no multi-start."""
     model = bench_model(data, law, coupling, noise, actuator, offset)
     k = model.n_physical
     base = model.z0()
@@ -269,12 +270,15 @@ def fit_model(
 
     if start_from is not None:
         # its parameters by name (same data: same nuisance centres and scales); the new
-        # ones at their start values, the AR(1) coefficient where it ended
+        # ones where this model reduces to that one if they say (nested_at), else at
+        # their start values; the AR(1) coefficient where it ended
         prev = start_from.model.names
         z = np.array(
             [
-                start_from.z[prev.index(n)] if n in prev else base[i]
-                for i, n in enumerate(model.names)
+                start_from.z[prev.index(p.name)]
+                if p.name in prev
+                else (base[i] if p.nested_at is None else p.internal(p.nested_at))
+                for i, p in enumerate(model.params)
             ]
         )
         best = run(z, everything, start_from.phi, _POLISH_STEPS)

@@ -2,18 +2,22 @@
 
 The bench vibrates the webbing normal to the sliding, while the contact model
 (:func:`idtool.prescribed_cycle_average`) needs a slip amplitude along it. The link is
-an effective coupling to identify from the traces. Two nested laws:
+an effective coupling to identify from the traces. This module holds the interface
+(:class:`AbstractCoupling`) and the registry (:data:`COUPLINGS`); each law is one module
+that registers itself:
 
-* :class:`ConstantCoupling`: ``a = gain * alpha * A_max``;
-* :class:`PowerLimitedCoupling`: ``a = gain * alpha * A_max / sqrt(1 + (alpha N / P)^2)``.
-  At small ``alpha N`` it is the constant law; at large ``alpha N`` the amplitude
-  saturates at ``gain * A_max * P / N``: it no longer grows with the commanded amplitude
-  and falls with the normal load, as the paper reports (the welder's power limits the
-  effect; 50% and 70% amplitude differ little at 450 N). ``P -> inf`` recovers the
-  constant law, so the two are nested.
+* ``constant`` (:mod:`idtool._model._coupling_constant`): ``a = gain * alpha * A_max``;
+* ``power-limited`` (:mod:`idtool._model._coupling_power_limited`):
+  ``a = gain * alpha * A_max / sqrt(1 + (alpha N / P)^2)``;
+* ``exponential`` (:mod:`idtool._model._coupling_exponential`):
+  ``a = gain * A_max * (P / N) * (1 - exp(-alpha N / P))``.
 
-``alpha`` is the commanded amplitude fraction in [0, 1], ``A_max`` the horn's maximum
-amplitude [m], ``N`` the normal load [N].
+The two saturating laws are the constant one at small ``alpha N`` and saturate at
+``gain * A_max * P / N`` at large ``alpha N`` (the welder's power limits the effect;
+50% and 70% amplitude differ little at 450 N in the paper), the power limit through an
+algebraic knee, the exponential one through a softer one; ``P -> inf`` recovers the
+constant law, so each nests it. ``alpha`` is the commanded amplitude fraction in
+[0, 1], ``A_max`` the horn's maximum amplitude [m], ``N`` the normal load [N].
 """
 
 from __future__ import annotations
@@ -23,17 +27,24 @@ from collections.abc import Mapping
 from typing import ClassVar
 
 import equinox as eqx
-import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from idtool._model._params import Param
 from idtool._registry import Registry
 
-__all__ = ["COUPLINGS", "GAIN", "AbstractCoupling", "ConstantCoupling", "PowerLimitedCoupling"]
+__all__ = [
+    "COUPLINGS",
+    "GAIN",
+    "AbstractCoupling",
+    "ConstantCoupling",
+    "ExponentialCoupling",
+    "PowerLimitedCoupling",
+    "load_scale_param",
+]
 
 COUPLINGS: Registry[type[AbstractCoupling]] = Registry("coupling law")
 
-GAIN = Param(
+GAIN: Param = Param(
     "coupling_gain",
     "1",
     "log",
@@ -73,54 +84,29 @@ class AbstractCoupling(eqx.Module):
         """Effective slip amplitude [m] seen by the contact model."""
 
 
-@COUPLINGS.register("constant")
-class ConstantCoupling(AbstractCoupling):
-    """``a = gain * alpha * A_max``; ``gain`` is dimensionless."""
-
-    gain: Float[ArrayLike, ""]
-
-    @classmethod
-    def from_values(cls, values):
-        return cls(gain=values["coupling_gain"])
-
-    def amplitude_m(self, amplitude_fraction, normal_load_n, max_amplitude_m):
-        shape = jnp.broadcast_shapes(jnp.shape(amplitude_fraction), jnp.shape(normal_load_n))
-        return jnp.broadcast_to(
-            self.gain * jnp.asarray(amplitude_fraction) * max_amplitude_m, shape
-        )
-
-
-@COUPLINGS.register("power-limited")
-class PowerLimitedCoupling(AbstractCoupling):
-    """``a = gain * alpha * A_max / sqrt(1 + (alpha N / P)^2)``.
-
-    Attributes:
-        gain: small-signal coupling (dimensionless), as in :class:`ConstantCoupling`.
-        power_load_n: load scale P [N] of the power limit; larger is weaker.
-    """
-
-    gain: Float[ArrayLike, ""]
-    power_load_n: Float[ArrayLike, ""]
-    fit_params: ClassVar[tuple[Param, ...]] = (
-        GAIN,
-        Param(
-            "power_load_n",
-            "N",
-            "log",
-            1.0,
-            1e5,
-            physical=True,
-            start=300.0,
-            start_box=(20.0, 2000.0),
-            description="load scale P of the power limit",
-        ),
+def load_scale_param(name: str, description: str, hi: float = 1e5) -> Param:
+    """The load scale ``P`` [N] of a saturating law, from 1 N to ``hi`` (same multi-start
+    box for every law, so that their fits start alike). A fit nested in the constant
+    law starts at ``P = hi / 2``, where ``x = alpha N / P`` is below ``2000 / hi`` on any
+    bench (loads below 1 kN): the power limit deviates from the constant law by
+    ``x^2 / 2`` (2e-4 at ``hi = 1e5``), the exponential saturation by ``x / 2`` (it
+    takes ``hi = 1e7`` for 1e-4), a start in the constant law's basin."""
+    return Param(
+        name,
+        "N",
+        "log",
+        1.0,
+        hi,
+        physical=True,
+        start=300.0,
+        start_box=(20.0, 2000.0),
+        nested_at=hi / 2.0,
+        description=description,
     )
 
-    @classmethod
-    def from_values(cls, values):
-        return cls(gain=values["coupling_gain"], power_load_n=values["power_load_n"])
 
-    def amplitude_m(self, amplitude_fraction, normal_load_n, max_amplitude_m):
-        alpha = jnp.asarray(amplitude_fraction)
-        x = alpha * jnp.asarray(normal_load_n) / self.power_load_n
-        return self.gain * alpha * max_amplitude_m / jnp.sqrt(1.0 + x**2)
+# The laws register themselves on import, the registry listing them in import order
+# (the constant law first: the simplest). Imported last: each imports the interface.
+from idtool._model._coupling_constant import ConstantCoupling  # noqa: E402
+from idtool._model._coupling_exponential import ExponentialCoupling  # noqa: E402
+from idtool._model._coupling_power_limited import PowerLimitedCoupling  # noqa: E402

@@ -40,6 +40,10 @@ class Param:
         start: the fit's start value when the data suggest none.
         start_box: ``(lo, hi)`` of the multi-start's log-uniform draws, or ``None`` for
             a parameter the multi-start does not vary.
+        nested_at: a value at which the law that declares it (all but) reduces to a
+            simpler law, where a fit of the richer law starts from the simpler law's
+            optimum (a saturating coupling's load scale far above every ``alpha N``: the
+            constant coupling); ``None`` starts there at ``start``.
         description: what it is, in words, for reports.
     """
 
@@ -53,6 +57,7 @@ class Param:
     physical: bool = False
     start: float = 1.0
     start_box: tuple[float, float] | None = None
+    nested_at: float | None = None
     description: str = ""
 
     def __post_init__(self):

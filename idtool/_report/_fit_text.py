@@ -109,6 +109,8 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
             for key, c in run.ranking
         ],
         "choice": run.reason,
+        # each coupling law's best candidate and its Akaike/Schwarz weight
+        "coupling_laws": [w.to_dict() for w in run.coupling_weights.values()],
         "multistart": [
             {
                 "rss": o["rss"],
@@ -226,6 +228,18 @@ def fit_report(run: FitRun) -> str:
         lines.append(
             f"    {key:{width}s}  AIC {c.aic:10.1f}  BIC {c.bic:10.1f}  dBIC {c.bic - best:7.1f}"
         )
+    laws = run.coupling_weights
+    if len(laws) > 1:
+        lines.append(
+            "[[Coupling laws]]  (each law's best model; weights exp(-delta/2), normalised: "
+            "BIC's ~ the law's posterior probability, AIC's its predictive standing)"
+        )
+        width = max(len(n) for n in laws)
+        for w in laws.values():
+            lines.append(
+                f"    {w.law:{width}s}  BIC weight {w.bic_weight:6.3f}  AIC weight "
+                f"{w.aic_weight:6.3f}  ({w.key})"
+            )
     lines.append("[[Friction ratio at each operating point]]")
     seen = set()
     for i in range(d.n_traces):

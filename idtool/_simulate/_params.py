@@ -53,8 +53,9 @@ class ContactParams:
 class CouplingParams:
     """Horn amplitude -> slip amplitude.
 
-    ``law`` is 'constant', 'power_limited' (load scale ``power_load_n`` P [N]) or the
-    truth-only 'load_exponential' (load scale ``load_scale_n`` [N]; see
+    ``law`` is 'constant', 'power_limited' (load scale ``power_load_n`` P [N]),
+    'exponential' (load scale ``saturation_load_n`` P [N]) or the truth-only
+    'load_exponential' (load scale ``load_scale_n`` [N]; see
     :mod:`idtool._simulate._truth_coupling`).
     """
 
@@ -62,6 +63,7 @@ class CouplingParams:
     gain: float
     power_load_n: float | None = None
     load_scale_n: float | None = None
+    saturation_load_n: float | None = None
 
     @property
     def in_fit(self) -> bool:
@@ -75,6 +77,7 @@ class CouplingParams:
             "coupling_gain": self.gain,
             "power_load_n": self.power_load_n,
             "load_scale_n": self.load_scale_n,
+            "saturation_load_n": self.saturation_load_n,
         }
         if self.law in TRUTH_ONLY_COUPLINGS:
             return TRUTH_ONLY_COUPLINGS[self.law].from_values(values)
@@ -205,6 +208,7 @@ class BenchParams:
                 gain=float(d["coupling"]["gain"]),
                 power_load_n=_optional_float(d["coupling"].get("power_load_n")),
                 load_scale_n=_optional_float(d["coupling"].get("load_scale_n")),
+                saturation_load_n=_optional_float(d["coupling"].get("saturation_load_n")),
             ),
             actuator=_actuator(d["actuator"]),
             horn_switching=SwitchingParams(**_floats(d["horn_switching"])),
