@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -311,6 +311,7 @@ def fit(
     variability: bool = True,
     actuator: str = "auto",
     offset: str = "auto",
+    progress: Callable[[str], None] | None = None,
 ) -> Fit:
     """Identify Kt, mu and the coupling from every trace of ``dataset`` at once.
 
@@ -338,6 +339,9 @@ def fit(
         offset: the load-cell offset within a trace, a name of :data:`idtool.OFFSETS`
             ("constant"; "drift": a linear drift per trace), or "auto" (default: both,
             the lower BIC kept).
+        progress: called with a line of text as each stage of the fit starts (each
+            candidate model, the interval checks, the levels model); ``print`` shows
+            them.
     """
     if starts < 1:
         raise IdtoolError(f"starts = {starts}: give at least 1")
@@ -357,6 +361,7 @@ def fit(
         variability=variability,
         actuator=actuator,
         offset=offset,
+        progress=progress,
     )
     out = Fit(dataset, run.chosen, run)
     out.seconds = time.perf_counter() - started

@@ -178,13 +178,23 @@ def test_fit_command_writes_fit_json_and_refuses_to_overwrite(tmp_path, capsys):
     assert {"aic", "bic", "n_data", "idtool_version"} <= set(doc)
     for png in ("traces.png", "residuals.png"):
         assert (out / png).read_bytes()[:4] == b"\x89PNG"
-    assert "[[Physical parameters]]" in capsys.readouterr().out
+    out_text, progress = capsys.readouterr()
+    assert "[[Physical parameters]]" in out_text
+    # progress on stderr, a line per stage: each candidate, intervals, levels model
+    assert "idtool fit: [" in progress and "fitting dahl/power-limited/slope/constant" in progress
+    assert "scatter and the model discrepancy" in progress
 
     before = (out / "fit.json").read_bytes()
     assert main(["fit", str(data_dir), "--out", str(out)]) == 2
     assert "--force" in capsys.readouterr().err
     assert (out / "fit.json").read_bytes() == before
     assert sorted(p.name for p in out.parent.iterdir()) == ["small"]  # no leftovers
+
+    # --json: fit.json on stdout and nothing else, for scripts
+    assert main(["fit", str(data_dir), "--out", str(out), "--force", "--json", "-q"]) == 0
+    printed, progress = capsys.readouterr()
+    assert json.loads(printed) == json.loads((out / "fit.json").read_text())
+    assert progress == ""  # --quiet: no progress either
 
 
 def test_fit_command_on_bad_data_writes_nothing(tmp_path, capsys):

@@ -58,7 +58,8 @@ def sampled(fit_folder, tmp_path_factory):
     none, whatever the order they run in): short, so not converged."""
     folder = tmp_path_factory.mktemp("sampled") / "small"
     shutil.copytree(fit_folder, folder)
-    assert main(["sample", str(folder), "--walkers", "20", "--steps", "60", "--no-progress"]) == 0
+    argv = ["sample", str(folder), "--walkers", "20", "--steps", "60", "--no-progress"]
+    assert main(argv) == 3  # outputs written, chain not converged (documented status)
     return folder
 
 
@@ -93,7 +94,10 @@ def test_sample_command_refuses_to_restart_and_resumes(sampled, capsys):
     assert "--resume" in capsys.readouterr().err
     assert (sampled / "chain.h5").read_bytes() == before
     args = ["sample", str(sampled), "--resume", "--steps", "80", "--no-progress"]
-    assert main(args) == 0
+    assert main([*args, "--json"]) == 3
+    out, err = capsys.readouterr()
+    assert json.loads(out)["diagnostics"]["converged"] is False  # sample.json, as written
+    assert "did NOT converge" in err and "--resume" in err
     doc = json.loads((sampled / "sample.json").read_text())
     assert doc["diagnostics"]["steps"] == 80 and doc["timing_s"]["steps_this_run"] == 20
     assert main([*args[:-3], "--noise", "gaussian", "--steps", "90", "--no-progress"]) == 2

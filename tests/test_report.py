@@ -38,7 +38,7 @@ def sampled_report(fitted, tmp_path_factory):
     folder = tmp_path_factory.mktemp("report-posterior") / "r"
     shutil.copytree(fitted, folder)
     argv = ["sample", str(folder), "--walkers", "20", "--steps", "150", "--no-progress"]
-    assert main(argv) == 0
+    assert main(argv) in (0, 3)  # 3: written, but too short to converge (the report says)
     assert main(["report", str(folder)]) == 0
     return folder
 

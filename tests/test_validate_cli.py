@@ -45,6 +45,29 @@ def test_validate_json_summary(capsys, tmp_path):
     assert summary["sha256"] == idtool.load_dataset(root).sha256
 
 
+def test_quiet_prints_nothing_but_errors_and_keeps_json(capsys, tmp_path):
+    root = make_dataset(tmp_path / "d")
+    assert main(["validate", str(root), "--quiet"]) == 0
+    assert capsys.readouterr() == ("", "")
+    assert main(["validate", str(root), "-q", "--json"]) == 0  # asked for: printed
+    assert json.loads(capsys.readouterr().out)["sha256"] == idtool.load_dataset(root).sha256
+    (root / "dataset.json").write_text("{not json")
+    assert main(["validate", str(root), "--quiet"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and "dataset.json" in err
+
+
+def test_every_command_documents_quiet_and_the_exit_statuses(capsys):
+    from idtool._cli._main import build_parser
+
+    parser = build_parser()
+    commands = parser._subparsers._group_actions[0].choices  # type: ignore[union-attr]
+    for name, command in commands.items():
+        text = command.format_help()
+        assert "--quiet" in text, name
+        assert "3 'sample'" in " ".join(text.split()), name
+
+
 def test_validate_prints_warnings(capsys, tmp_path):
     root = make_dataset(tmp_path / "d")
     set_cell(root / "traces/b.csv", 30, "time_s", "0.295")

@@ -16,7 +16,7 @@ __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
-    from idtool._cli._main import main
+    from idtool._cli._main import EXIT_NOT_CONVERGED, main
     from idtool._data._example import example_dataset_path
 
     out = Path(args.out)
@@ -32,14 +32,17 @@ def _run(args: argparse.Namespace) -> int:
         ["report", str(out)],
     ]
     started = time.perf_counter()
+    final = 0
     for argv in steps:
         print(f"\n$ idtool {' '.join(argv)}", flush=True)
         status = main(argv)
-        if status:
+        if status == EXIT_NOT_CONVERGED:  # go on: predict and report say so too
+            final = status
+        elif status:
             return status
     print(f"\ndemo finished in {time.perf_counter() - started:.0f} s")
     print(f"report: {(out / 'report.html').resolve()}")
-    return 0
+    return final
 
 
 def register(sub: argparse._SubParsersAction) -> None:

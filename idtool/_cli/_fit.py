@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
@@ -17,8 +18,8 @@ def _run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     refuse_existing(args.out, args.force)  # before minutes of fitting, not after
     dataset = idtool.load_dataset(Path(args.dataset))
-    for w in dataset.warnings:
-        print(f"idtool fit: {w}")
+    for w in dataset.warnings:  # on stderr: stdout may be the --json document
+        print(f"idtool fit: {w}", file=sys.stderr)
     fit = idtool.fit(
         dataset,
         law=args.law,
@@ -32,14 +33,23 @@ def _run(args: argparse.Namespace) -> int:
         compare_laws=args.compare_laws,
         profile=args.profile,
         mains_hz=args.mains_hz,
+        progress=None if args.quiet else _progress,
     )
     fit.save(args.out, force=args.force, command=args.argv)
+    if args.json:  # fit.json as written, for scripts (the report is in report.txt)
+        print((Path(args.out) / "fit.json").read_text())
+        return 0
     print(fit.report())
     print(
         f"wrote {args.out}/ (fit.json, report.txt, traces.png, residuals.png) in "
         f"{time.perf_counter() - started:.1f} s"
     )
     return 0
+
+
+def _progress(line: str) -> None:
+    # stderr: stdout carries the report (or the --json document)
+    print(f"idtool fit: {line}", file=sys.stderr, flush=True)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -104,4 +114,5 @@ def register(sub: argparse._SubParsersAction) -> None:
         "dataset, else the hum found in the traces, else 50",
     )
     p.add_argument("--force", action="store_true", help="replace an existing --out")
+    p.add_argument("--json", action="store_true", help="print fit.json instead of the text report")
     p.set_defaults(func=_run)

@@ -8,11 +8,25 @@ printed here without a traceback, with exit status 2.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import sys
 from collections.abc import Sequence
 
 from idtool._errors import IdtoolError
 from idtool._version import __version__
+
+# Exit statuses (also in every command's --help and the README).
+EXIT_OK = 0
+EXIT_BAD_INPUT = 2  # bad input or refused overwrite: nothing written
+EXIT_NOT_CONVERGED = 3  # sample: outputs written, but the chain did not converge
+EXIT_INTERRUPTED = 130
+
+EXIT_CODES = (
+    "exit status: 0 done; 2 bad input or an output that exists without --force (nothing "
+    "written); 3 'sample' wrote its outputs but the chain did not converge (run longer "
+    "with --resume); 130 interrupted"
+)
 
 _COMMANDS = (
     "_curve",
@@ -37,9 +51,19 @@ def build_parser() -> argparse.ArgumentParser:
         "contacts from bench load-cell traces.",
     )
     parser.add_argument("--version", action="version", version=f"idtool {__version__}")
+    parser.epilog = EXIT_CODES
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in _COMMANDS:
         importlib.import_module(f"idtool._cli.{name}").register(sub)
+    for command in sub.choices.values():  # what every command understands alike
+        command.add_argument(
+            "-q",
+            "--quiet",
+            action="store_true",
+            help="print nothing but errors and what --json asks for; no progress bars "
+            "(the exit status says how it went)",
+        )
+        command.epilog = EXIT_CODES
     return parser
 
 
@@ -82,13 +106,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     args.argv = argv  # recorded in every output's provenance
     try:
+        if args.quiet and not getattr(args, "json", False):
+            with contextlib.redirect_stdout(io.StringIO()):
+                return int(args.func(args) or 0)
         return int(args.func(args) or 0)
     except IdtoolError as err:
         print(f"idtool {args.command}: {err}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print(f"idtool {args.command}: interrupted; nothing was written", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
     except BrokenPipeError:
         # The reader went away (``idtool ... | head``): not an error of ours. Point
         # stdout at devnull so the interpreter's final flush does not complain.

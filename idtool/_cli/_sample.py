@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
+from idtool._cli._main import EXIT_NOT_CONVERGED
 from idtool._errors import IdtoolError
 
 __all__ = ["register"]
@@ -38,7 +40,7 @@ def _run(args: argparse.Namespace) -> int:
             priors=args.priors,
             chain_path=chain,
             resume=args.resume,
-            progress=not args.no_progress,
+            progress=not (args.no_progress or args.quiet),
             checkpoint_s=args.checkpoint_s,
         )
     except KeyboardInterrupt:
@@ -46,10 +48,25 @@ def _run(args: argparse.Namespace) -> int:
         print(f"idtool sample: interrupted; {saved}; continue with --resume", flush=True)
         return 130
     report = fit.save_posterior(command=args.argv)
-    print(report)
-    print(
-        f"wrote {folder}/ ({', '.join(POSTERIOR_FILES)}) in {time.perf_counter() - started:.1f} s"
-    )
+    assert fit.posterior is not None  # save_posterior refuses otherwise
+    if args.json:
+        print((folder / "sample.json").read_text())
+    else:
+        print(report)
+        print(
+            f"wrote {folder}/ ({', '.join(POSTERIOR_FILES)}) in "
+            f"{time.perf_counter() - started:.1f} s"
+        )
+    diagnostics = fit.posterior.diagnostics
+    if not diagnostics.converged:
+        # on stderr, so --quiet and --json keep it: the draws are not to be trusted yet
+        print(
+            f"idtool sample: the chain did NOT converge (about {diagnostics.steps_needed} "
+            "more steps needed): its outputs are written, but continue it with --resume "
+            "--steps N before using them",
+            file=sys.stderr,
+        )
+        return EXIT_NOT_CONVERGED
     return 0
 
 
@@ -90,6 +107,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--priors", help="TOML or JSON file overriding default priors")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print sample.json (the diagnostics) instead of the report",
+    )
     p.add_argument(
         "--checkpoint-s",
         type=float,

@@ -17,6 +17,8 @@ it nests.
 from __future__ import annotations
 
 import dataclasses
+import time
+from collections.abc import Callable
 
 import jax.numpy as jnp
 import numpy as np
@@ -133,6 +135,7 @@ def fit_dataset(
     variability: bool = True,
     actuator: str = "auto",
     offset: str = "auto",
+    progress: Callable[[str], None] | None = None,
 ) -> FitRun:
     """Fit ``dataset``; ``law``, ``coupling``, ``noise``, ``actuator`` and ``offset`` by
     registered name (:data:`FRICTION_LAWS`, :data:`COUPLINGS`, :data:`NOISE_MODELS`,
@@ -143,7 +146,15 @@ def fit_dataset(
     whole periods of it; None takes ``rig.mains_frequency_hz``, else the hum found in
     the traces, else 50 Hz (:func:`idtool._data._mains.resolve_mains`). ``variability``
     (default): the chosen fit's intervals carry pull-to-pull scatter and model
-    discrepancy (:mod:`idtool._fit._variability`); False gives the noise-only model."""
+    discrepancy (:mod:`idtool._fit._variability`); False gives the noise-only model.
+    ``progress``: called with a line of text as each stage starts (each candidate model,
+    the interval checks, the levels model), for a command line's progress."""
+    started = time.perf_counter()
+
+    def say(what: str) -> None:
+        if progress is not None:
+            progress(f"[{time.perf_counter() - started:5.1f} s] {what}")
+
     mains, mains_source, mains_warnings = resolve_mains(dataset, mains_hz)
     data = prepare_fit_data(dataset, mains_hz=mains, periods_per_block=2, mains_source=mains_source)
     mains_warnings += data.notes
@@ -165,6 +176,7 @@ def fit_dataset(
             group: dict[str, FitResult] = {}
             nested = None
             for ac in actuators:
+                say(f"fitting {_key(lw, cp, ac, offsets[0])}")
                 group[_key(lw, cp, ac, offsets[0])] = fit = fit_model(
                     data, lw, cp, seed, n_starts, noise, ac, start_from=nested, offset=offsets[0]
                 )
@@ -183,14 +195,17 @@ def fit_dataset(
             base = min(group.values(), key=lambda f: f.bic)
             ac = base.model.actuator.name
             for of in offsets[1:]:
+                say(f"fitting {_key(lw, cp, ac, of)}")
                 group[_key(lw, cp, ac, of)] = fit_model(
                     data, lw, cp, seed, n_starts, noise, ac, start_from=base, offset=of
                 )
             candidates |= group
     ranked = sorted(candidates.items(), key=lambda kv: kv[1].bic)
     best_key, best = ranked[0]
+    say(f"checking the intervals of {best_key}")
     best = candidates[best_key] = check_intervals(best)
     if variability:  # pull-to-pull scatter and model discrepancy (issue 10)
+        say("estimating the pull-to-pull scatter and the model discrepancy")
         best = candidates[best_key] = with_variability(best)
     weights = coupling_weights(candidates)
     chosen = weights[best.model.coupling.name]
