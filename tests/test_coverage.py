@@ -85,6 +85,9 @@ def _score(kind: str, seed: int) -> dict:
         "half_width": half_width(fit),
         "actuator": fit.model.actuator.name,
         "offset": fit.model.offset.name,
+        "misspecified": any(
+            w.startswith("the physical model misses the operating points") for w in fit.warnings
+        ),
     }
     if plain is not None:
         out["half_width_noise_only"] = half_width(plain)
@@ -133,7 +136,8 @@ def test_new_trace_bands_hold_new_pulls(scores):
 @pytest.mark.xfail(
     reason="known gap (issue 10 open): Kt's interval covers 17 of 21 (seeds 4-21); under "
     "the truth-only coupling law Kt is biased beyond its interval on 4 of the 6 coupling "
-    "and 'all' benches (the discrepancy term covers the friction ratio, not Kt)",
+    "and 'all' benches (the discrepancy term covers the friction ratio, not Kt; the fit "
+    "warns there that Kt rests on the coupling's shape, test below)",
     strict=False,
 )
 def test_kt_interval_covers_the_truth(scores):
@@ -178,3 +182,11 @@ def test_clean_benches_keep_the_constant_offset(scores):
     for s in scores:
         if s["kind"] in ("clean", "actuator", "mains60", "coupling", "scatter"):
             assert s["offset"] == "constant", s
+
+
+def test_a_coupling_of_another_shape_is_flagged(scores):
+    """Where Kt misses its interval (the truth-only coupling), the report says that Kt
+    rests on the coupling law's shape: the discrepancy's interval starts above 3% there
+    (0.04-0.08) and nowhere else (at most 0.016)."""
+    for s in scores:
+        assert s["misspecified"] == (s["kind"] in ("coupling", "all")), s

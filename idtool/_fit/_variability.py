@@ -107,6 +107,11 @@ SD_PARAMS = (
     ),
 )
 _GRID = 241  # points of each sd's grid (REML likelihood times the spike-and-slab prior)
+# A discrepancy whose 95% interval starts above this (3% of the friction ratio) says the
+# physical model is misspecified: on the coverage benches it does so on 6 of the 6
+# whose coupling has a shape the fit does not ship (lower ends 0.04-0.08) and on none
+# of the 15 others (at most 0.016, a scatter bench with one trace per operating point).
+MISSPECIFIED_SD = 0.03
 SD_SLAB_SCALE = 0.1  # half-normal scale of an sd's prior when it is not zero
 SD_PRIOR_ZERO = 0.5  # prior probability that an sd is zero
 
@@ -443,6 +448,17 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
             f"the physical model misses the traces' own levels by more than their noise "
             f"explains (chi2 = {chi2:.1f} on {dof} degrees of freedom, p = {p_value:.2g}): "
             "pull-to-pull scatter or model discrepancy; both are in the bands"
+        )
+    disc = sds.get("discrepancy_fr")
+    if disc is not None and disc[1] > MISSPECIFIED_SD:
+        warnings.append(
+            f"the physical model misses the operating points by {100 * disc[0]:.0f}% in "
+            f"friction ratio (discrepancy sd, 95% interval {100 * disc[1]:.0f}-"
+            f"{100 * disc[2]:.0f}%): the bands carry it, but Kt and the coupling "
+            "parameters are read through the coupling law's shape (Lambda = Kt a / (mu N)) "
+            "and their intervals assume it is right; under another load dependence of the "
+            "coupling Kt came out 0.13-0.42x its truth on simulated benches, outside its "
+            "interval. Try --coupling auto, and treat Kt as depending on the coupling law"
         )
     # What the design lets the levels model measure: facts of the data, not doubts about
     # the fit (a short ON window is the bench's design, the OFF level still counts).
