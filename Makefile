@@ -12,8 +12,9 @@ $(STAMP): pyproject.toml constraints.txt
 	PIP_CONSTRAINT=$(CURDIR)/constraints.txt $(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[dev]'
 	touch $(STAMP)
 
+# exit status 3: everything written, but the chain did not converge (the demo says so)
 demo: $(STAMP)
-	$(BIN)/idtool demo --force
+	$(BIN)/idtool demo --force || [ $$? -eq 3 ]
 
 lint: $(STAMP)
 	$(BIN)/ruff check idtool tests benchmarks
