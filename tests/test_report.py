@@ -8,6 +8,7 @@ import json
 import re
 import shutil
 import subprocess
+from pathlib import Path
 
 import matplotlib.image as mpimg
 import numpy as np
@@ -57,6 +58,23 @@ def test_report_with_a_posterior_shows_it(fitted, sampled_report):
     assert (sampled_report / "figures" / "walkers.png").is_file()
     assert "&quot;converged&quot;: false" in page  # 150 steps: reported unconverged
     assert "Draws: posterior" in page
+    # ... and said first, above every section, in a banner
+    banner = page.index('<p class="banner">The posterior chain did NOT converge')
+    assert banner < page.index("<section")
+    assert "--resume" in page[banner : page.index("</p>", banner)]
+
+
+def test_banners_only_for_what_is_wrong(fitted):
+    """No posterior, no convergence banner; a misfit banner exactly for each misfit
+    warning of the fit."""
+    page = (fitted / "report.html").read_text()
+    assert "did NOT converge" not in page
+    misfit = [
+        w
+        for w in json.loads((fitted / "fit.json").read_text())["warnings"]
+        if w.startswith("the physical model misses")
+    ]
+    assert page.count('<p class="banner">Model misfit: ') == len(misfit)
 
 
 def images_of(page: str) -> list[bytes]:
@@ -102,9 +120,7 @@ def test_report_on_a_folder_that_is_not_a_fit(tmp_path, capsys):
     assert "idtool fit" in capsys.readouterr().err
 
 
-@pytest.mark.skipif(shutil.which("chromium") is None, reason="Debian's chromium is not installed")
-def test_report_renders_in_headless_chromium(fitted, tmp_path):
-    shot = tmp_path / "shot.png"
+def _screenshot(page: Path, shot: Path, profile: Path, height: int) -> np.ndarray:
     subprocess.run(
         [
             "chromium",
@@ -116,16 +132,32 @@ def test_report_renders_in_headless_chromium(fitted, tmp_path):
             "--disable-background-networking",
             "--disable-component-update",
             "--disable-sync",
-            f"--user-data-dir={tmp_path / 'profile'}",
-            "--window-size=1200,2400",
+            f"--user-data-dir={profile}",
+            f"--window-size=1200,{height}",
             f"--screenshot={shot}",
-            (fitted / "report.html").as_uri(),
+            page.as_uri(),
         ],
         check=True,
         capture_output=True,
         timeout=120,
     )
-    pixels = mpimg.imread(shot)
+    return mpimg.imread(shot)
+
+
+@pytest.mark.skipif(shutil.which("chromium") is None, reason="Debian's chromium is not installed")
+def test_the_unconverged_banner_is_on_the_first_screen(sampled_report, tmp_path):
+    pixels = _screenshot(sampled_report / "report.html", tmp_path / "s.png", tmp_path / "p", 900)
+    # the banner's pink (#fff0f0) and its dark-red border (#b00000) within the first
+    # 900 px that a reader sees before scrolling
+    rgb = np.round(pixels[..., :3] * 255).astype(int)
+    pink = np.all(rgb == (255, 240, 240), axis=-1)
+    border = np.all(np.abs(rgb - (176, 0, 0)) <= 8, axis=-1)
+    assert pink.sum() > 5000 and border.sum() > 500
+
+
+@pytest.mark.skipif(shutil.which("chromium") is None, reason="Debian's chromium is not installed")
+def test_report_renders_in_headless_chromium(fitted, tmp_path):
+    pixels = _screenshot(fitted / "report.html", tmp_path / "shot.png", tmp_path / "profile", 2400)
     assert pixels.shape[0] >= 2000 and pixels.shape[1] >= 1100
     # Rendered content, not an empty page: many distinct colours.
     assert np.unique(pixels.reshape(-1, pixels.shape[-1]), axis=0).shape[0] > 50

@@ -89,6 +89,25 @@ def _posterior(folder: Path):
     return idata.posterior, json.loads(idata.posterior.attrs["idtool"])
 
 
+def _banners(doc: dict, meta: dict | None) -> str:
+    """Verdicts that must be seen before anything else: a posterior chain that has not
+    converged (its columns, bands and plots are not to be trusted yet) and a physical
+    model that misses the data by more than their noise explains."""
+    out = []
+    if meta is not None and not meta["diagnostics"].get("converged", True):
+        diag = meta["diagnostics"]
+        out.append(
+            f"The posterior chain did NOT converge ({diag.get('steps')} steps; about "
+            f"{diag.get('steps_needed')} more needed): the posterior's columns, bands and "
+            "plots below are not to be trusted yet. Continue it with idtool sample FIT "
+            "--resume --steps N, then report again."
+        )
+    out += [
+        f"Model misfit: {w}" for w in doc["warnings"] if w.startswith("the physical model misses")
+    ]
+    return "".join(f'<p class="banner">{html.escape(b)}</p>' for b in out)
+
+
 def write_report(fit_folder: str | Path) -> Path:
     """Write ``report.html``, ``report.md`` and ``figures/*.png`` into ``fit_folder``."""
     from idtool._report._figures import (
@@ -247,7 +266,7 @@ def write_report(fit_folder: str | Path) -> Path:
         sec["Provenance"] = f"<pre>{html.escape(json.dumps(prov, indent=1))}</pre>"
         md += ["", f"Dataset sha256 {ds.sha256}; fit command `{doc['command']}`"]
 
-    body = "".join(
+    body = _banners(doc, meta) + "".join(
         f'<section id="s{i}"><h2>{html.escape(name)}</h2>{sec[name]}</section>'
         for i, name in enumerate(SECTIONS)
     )
@@ -257,6 +276,8 @@ def write_report(fit_folder: str | Path) -> Path:
         "body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}"
         "table{border-collapse:collapse;font-size:0.85em}td,th{border:1px solid #ccc;"
         "padding:2px 6px}img{max-width:100%;display:block;margin:0.5em 0}"
+        ".banner{border:2px solid #b00000;background:#fff0f0;padding:0.4em 1em;"
+        "margin:0.6em 0;font-weight:bold}"
         "</style></head><body>"
         f"<h1>idtool report: {html.escape(fit.dataset.name)}</h1>{body}</body></html>"
     )
