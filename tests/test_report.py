@@ -115,6 +115,16 @@ def test_report_writes_figures_and_markdown(fitted):
     assert md.startswith("# idtool report") and "Kt" in md
 
 
+def test_friction_ratio_figures_shade_the_tested_range(fitted):
+    """The grey span (0.9 grey) covers the tested loads (270-670 N of a 135-1005 N axis:
+    ~45% of the plot's width) and the tested amplitudes (50-70% of 5-100%: ~20%)."""
+    for name, share in (("fr_vs_load.png", 0.45), ("fr_vs_amplitude.png", 0.2)):
+        rgb = np.round(mpimg.imread(fitted / "figures" / name)[..., :3] * 255).astype(int)
+        grey = np.all(np.abs(rgb - 230) <= 1, axis=-1)
+        columns = np.mean(grey, axis=0) > 0.3  # columns mostly grey: the span
+        assert columns.sum() == pytest.approx(share * 0.78 * rgb.shape[1], rel=0.25), name
+
+
 def test_report_on_a_folder_that_is_not_a_fit(tmp_path, capsys):
     assert main(["report", str(tmp_path)]) == 2
     assert "idtool fit" in capsys.readouterr().err

@@ -81,7 +81,9 @@ def friction_ratio_figures(
     95% band of the mean FR (dark) and of the next pull (light, scatter added); over
     them each trace's own friction ratio (``fit.json`` traces: ``free_friction_ratio``,
     estimated from that trace alone, with its 95% interval from its own noise), or the
-    model's per-trace FR when the levels model is off."""
+    model's per-trace FR when the levels model is off. The tested range of the x axis
+    (the dataset's amplitudes, or loads) is shaded grey: outside it the curves are the
+    model's extrapolation."""
     loads = sorted({p["normal_load_n"] for p in points})
     alphas = sorted({p["amplitude_fraction"] for p in points})
     amp_grid = np.linspace(0.05, 1.0, 16)
@@ -117,9 +119,20 @@ def friction_ratio_figures(
                 zorder=3,
             )
 
-    def panel(groups, x_grid, curve, key, x_key, label, xlabel, title, path):
-        # One curve and band per group (a load, or an amplitude) against x_grid.
+    def panel(groups, x_grid, curve, key, x_key, label, xlabel, title, path, tested):
+        # One curve and band per group (a load, or an amplitude) against x_grid; the
+        # tested range of x shaded: outside it the curves extrapolate the model
         fig, ax = subplots(figsize=(6, 4))
+        ax.axvspan(min(tested), max(tested), color="0.9", lw=0, zorder=0)
+        ax.text(
+            0.5 * (min(tested) + max(tested)),
+            0.02,
+            "tested",
+            ha="center",
+            va="bottom",
+            fontsize=8,
+            color="0.35",
+        )
         for c, value in enumerate(groups):
             med, lo, hi, new_lo, new_hi = curve(value)
             ax.fill_between(x_grid, new_lo, new_hi, color=f"C{c}", alpha=0.12, lw=0)
@@ -128,7 +141,11 @@ def friction_ratio_figures(
             marks(ax, key, value, x_key)
         ax.set(xlabel=xlabel, ylabel="friction ratio FR", ylim=(0, 1.05))
         ax.legend(title=title)
-        ax.set_title("dark: mean FR 95%; light: next pull 95%; points: each trace", fontsize=9)
+        ax.set_title(
+            "dark: mean FR 95%; light: next pull 95%; points: each trace;\n"
+            "grey: the tested range (outside it the model extrapolates)",
+            fontsize=9,
+        )
         return _save(fig, path)
 
     p1 = panel(
@@ -141,6 +158,7 @@ def friction_ratio_figures(
         "commanded amplitude fraction",
         "normal load",
         out / "fr_vs_amplitude.png",
+        alphas,
     )
     p2 = panel(
         alphas,
@@ -152,6 +170,7 @@ def friction_ratio_figures(
         "normal load [N]",
         "amplitude",
         out / "fr_vs_load.png",
+        loads,
     )
     return p1, p2
 
