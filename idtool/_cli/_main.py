@@ -16,16 +16,15 @@ from collections.abc import Sequence
 from idtool._errors import IdtoolError
 from idtool._version import __version__
 
-# Exit statuses (also in every command's --help and the README).
-EXIT_OK = 0
+# Exit statuses (also in every command's --help and the README); 0 is done.
 EXIT_BAD_INPUT = 2  # bad input or refused overwrite: nothing written
 EXIT_NOT_CONVERGED = 3  # sample: outputs written, but the chain did not converge
 EXIT_INTERRUPTED = 130
 
 EXIT_CODES = (
-    "exit status: 0 done; 2 bad input or an output that exists without --force (nothing "
-    "written); 3 'sample' wrote its outputs but the chain did not converge (run longer "
-    "with --resume); 130 interrupted"
+    f"exit status: 0 done; {EXIT_BAD_INPUT} bad input or an output that exists without "
+    f"--force (nothing written); {EXIT_NOT_CONVERGED} 'sample' wrote its outputs but the "
+    f"chain did not converge (run longer with --resume); {EXIT_INTERRUPTED} interrupted"
 )
 
 _COMMANDS = (
@@ -106,10 +105,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     args.argv = argv  # recorded in every output's provenance
     try:
-        if args.quiet and not getattr(args, "json", False):
-            with contextlib.redirect_stdout(io.StringIO()):
-                return int(args.func(args) or 0)
-        return int(args.func(args) or 0)
+        silent = args.quiet and not getattr(args, "json", False)
+        with contextlib.redirect_stdout(io.StringIO()) if silent else contextlib.nullcontext():
+            return int(args.func(args) or 0)
     except IdtoolError as err:
         print(f"idtool {args.command}: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT

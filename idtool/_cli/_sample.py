@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from idtool._cli._main import EXIT_NOT_CONVERGED
+from idtool._cli._main import EXIT_INTERRUPTED, EXIT_NOT_CONVERGED
 from idtool._errors import IdtoolError
 
 __all__ = ["register"]
@@ -46,7 +46,7 @@ def _run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         saved = f"the steps done so far are in {chain}" if chain.exists() else "nothing saved"
         print(f"idtool sample: interrupted; {saved}; continue with --resume", flush=True)
-        return 130
+        return EXIT_INTERRUPTED
     report = fit.save_posterior(command=args.argv)
     assert fit.posterior is not None  # save_posterior refuses otherwise
     if args.json:

@@ -169,12 +169,13 @@ class _Linearisation(eqx.Module):
     aux: Any
 
 
-def _initial_state(z0: Array, lin: Any) -> dict[str, Any]:
-    """The iteration's state before the first linearisation (``lin``: shapes of a
-    :class:`_Linearisation`); the first update accepts ``z0`` whatever its loss."""
-    p, n = z0.size, lin.r.shape[0]
+def _initial_state(z0: Array, n: int, aux: Any) -> dict[str, Any]:
+    """The iteration's state before the first linearisation: ``n`` residuals, ``aux``
+    the shapes of the caller's auxiliary output; the first update accepts ``z0``
+    whatever its loss."""
+    p = z0.size
     return dict(
-        aux=jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), lin.aux),
+        aux=jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), aux),
         z=z0,
         loss=jnp.asarray(jnp.inf),
         r=jnp.zeros(n),
@@ -286,9 +287,7 @@ class ColouredLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     max_step: float = 5.0
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
-        jtj, jtr, aux = aux_struct
-        lin = _Linearisation(r=f_struct, jtj=jtj, jtr=jtr, a=jtj, g=jtr, aux=aux)
-        return _initial_state(jnp.asarray(y), lin)
+        return _initial_state(jnp.asarray(y), f_struct.shape[0], aux_struct[2])
 
     def step(self, fn, y, args, options, state, tags):
         lin = _linearise(fn, state["trial"], args, options["mask"])
@@ -379,19 +378,22 @@ def levenberg_marquardt_loop(
     max_steps: int | Array = 100,
 ) -> LMResult:
     """:func:`levenberg_marquardt` (default tolerances) driven by a plain
-    ``lax.while_loop`` instead of optimistix: the same iterations (:func:`_update`), the
-    reference that ``benchmarks/bench_fit.py`` and ``tests/test_lm.py`` compare the
-    optimistix solver with (time per step and identical iterates)."""
+    ``lax.while_loop`` instead of optimistix: the solver's own ``init``, ``step`` and
+    ``terminate``, the reference that ``benchmarks/bench_fit.py`` and
+    ``tests/test_lm.py`` compare the optimistix driver with (time per step and identical
+    iterates)."""
     solver = ColouredLevenbergMarquardt()
     fn = _solver_fn(equations)
     z0 = jnp.asarray(z0, float)
-    lin = jax.eval_shape(lambda z: _linearise(fn, z, args, mask), z0)
+    options = {"mask": jnp.asarray(mask), "max_steps": jnp.asarray(max_steps)}
+    f_struct, aux_struct = jax.eval_shape(fn, z0, args)
+    tags: frozenset = frozenset()
 
     def cond(s):
-        return s["first"] | (~s["done"] & ~s["failed"] & (s["steps"] < max_steps))
+        return ~solver.terminate(fn, s["z"], args, options, s, tags)[0]
 
     def body(s):
-        lin = _linearise(fn, s["trial"], args, mask)
-        return _update(s, lin, mask, solver.rtol, solver.max_step)
+        return solver.step(fn, s["z"], args, options, s, tags)[1]
 
-    return _result(jax.lax.while_loop(cond, body, _initial_state(z0, lin)))
+    state = solver.init(fn, z0, args, options, f_struct, aux_struct, tags)
+    return _result(jax.lax.while_loop(cond, body, state))

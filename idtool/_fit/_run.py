@@ -155,9 +155,9 @@ def fit_dataset(
         if progress is not None:
             progress(f"[{time.perf_counter() - started:5.1f} s] {what}")
 
-    mains, mains_source, mains_warnings = resolve_mains(dataset, mains_hz)
+    mains, mains_source, run_warnings = resolve_mains(dataset, mains_hz)
     data = prepare_fit_data(dataset, mains_hz=mains, periods_per_block=2, mains_source=mains_source)
-    mains_warnings += data.notes
+    run_warnings += data.notes  # the mains frequency and the blocks
     laws: tuple[str, ...] = (law,)
     if compare_laws:
         laws = tuple(n for n in FRICTION_LAWS if FRICTION_LAWS.get(n).fit_params)
@@ -176,8 +176,9 @@ def fit_dataset(
             group: dict[str, FitResult] = {}
             nested = None
             for ac in actuators:
-                say(f"fitting {_key(lw, cp, ac, offsets[0])}")
-                group[_key(lw, cp, ac, offsets[0])] = fit = fit_model(
+                key = _key(lw, cp, ac, offsets[0])
+                say(f"fitting {key}")
+                fit = fit_model(
                     data, lw, cp, seed, n_starts, noise, ac, start_from=nested, offset=offsets[0]
                 )
                 if nested is None and cp != couplings[0]:
@@ -190,7 +191,7 @@ def fit_dataset(
                         fit,
                         fit_model(data, lw, cp, seed, n_starts, noise, ac, simplest, offsets[0]),
                     )
-                    group[_key(lw, cp, ac, offsets[0])] = fit
+                group[key] = fit
                 nested = nested or fit
             base = min(group.values(), key=lambda f: f.bic)
             ac = base.model.actuator.name
@@ -211,7 +212,7 @@ def fit_dataset(
     chosen = weights[best.model.coupling.name]
     rivals = [w for w in weights.values() if w is not chosen and w.bic_weight > 0.05]
     if rivals:  # the data do not single out the coupling's shape
-        mains_warnings.append(
+        run_warnings.append(
             f"the coupling laws fit comparably (BIC weight {chosen.law} "
             f"{chosen.bic_weight:.2f}, "
             + ", ".join(f"{w.law} {w.bic_weight:.2f}" for w in rivals)
@@ -219,9 +220,9 @@ def fit_dataset(
             "or beyond the measured operating points the laws may disagree by more than "
             "its bands; compare the laws' fits before relying on them there"
         )
-    if mains_warnings:  # the mains frequency, the blocks, the laws: for the fit report
+    if run_warnings:  # for the fit report
         best = candidates[best_key] = dataclasses.replace(
-            best, warnings=[*best.warnings, *mains_warnings]
+            best, warnings=[*best.warnings, *run_warnings]
         )
     if len(ranked) == 1:
         reason = f"{best_key} as requested"

@@ -65,6 +65,7 @@ from idtool._model._params import Param
 
 __all__ = [
     "MIN_AT_LEVEL_S",
+    "MISFIT",
     "SD_PARAMS",
     "FreeLevels",
     "LevelDesign",
@@ -112,6 +113,9 @@ _GRID = 241  # points of each sd's grid (REML likelihood times the spike-and-sla
 # whose coupling has a shape the fit does not ship (lower ends 0.04-0.08) and on none
 # of the 15 others (at most 0.016, a scatter bench with one trace per operating point).
 MISSPECIFIED_SD = 0.03
+# How every warning that the physical model misses the data begins (the report shows
+# them as banners)
+MISFIT = "the physical model misses"
 SD_SLAB_SCALE = 0.1  # half-normal scale of an sd's prior when it is not zero
 SD_PRIOR_ZERO = 0.5  # prior probability that an sd is zero
 
@@ -445,14 +449,14 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
     warnings = []
     if p_value < 0.01:
         warnings.append(
-            f"the physical model misses the traces' own levels by more than their noise "
+            f"{MISFIT} the traces' own levels by more than their noise "
             f"explains (chi2 = {chi2:.1f} on {dof} degrees of freedom, p = {p_value:.2g}): "
             "pull-to-pull scatter or model discrepancy; both are in the bands"
         )
     disc = sds.get("discrepancy_fr")
     if disc is not None and disc[1] > MISSPECIFIED_SD:
         warnings.append(
-            f"the physical model misses the operating points by {100 * disc[0]:.0f}% in "
+            f"{MISFIT} the operating points by {100 * disc[0]:.0f}% in "
             f"friction ratio (discrepancy sd, 95% interval {100 * disc[1]:.0f}-"
             f"{100 * disc[2]:.0f}%): the bands carry it, but Kt and the coupling "
             "parameters are read through the coupling law's shape (Lambda = Kt a / (mu N)) "

@@ -16,6 +16,7 @@ import numpy as np
 
 from idtool._atomic import atomic_output_dir, write_text_atomic
 from idtool._fit._store import load_stored_fit
+from idtool._fit._variability import MISFIT
 from idtool._posterior._store import POSTERIOR_FILE
 from idtool._predict._predict import prediction_draws
 
@@ -102,9 +103,7 @@ def _banners(doc: dict, meta: dict | None) -> str:
             "plots below are not to be trusted yet. Continue it with idtool sample FIT "
             "--resume --steps N, then report again."
         )
-    out += [
-        f"Model misfit: {w}" for w in doc["warnings"] if w.startswith("the physical model misses")
-    ]
+    out += [f"Model misfit: {w}" for w in doc["warnings"] if w.startswith(MISFIT)]
     return "".join(f'<p class="banner">{html.escape(b)}</p>' for b in out)
 
 
