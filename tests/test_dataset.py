@@ -114,6 +114,20 @@ def test_path_to_dataset_json_is_accepted(tmp_path):
     assert load_dataset(root / "dataset.json").sha256 == load_dataset(root).sha256
 
 
+def test_the_labs_own_fields_are_kept(tmp_path):
+    """Top-level ``x_*`` fields reach ``Dataset.extensions`` in file order and survive a
+    write and a reload (the report shows them); the models ignore them."""
+    root = make_dataset(tmp_path / "d")
+    doc = read_json(root)
+    doc |= {"x_operator": "J. Doe", "x_batch": {"id": 7, "dyed": True}}
+    (root / "dataset.json").write_text(json.dumps(doc))
+    ds = load_dataset(root)
+    assert list(ds.extensions) == ["x_operator", "x_batch"]
+    assert ds.extensions["x_batch"] == {"id": 7, "dyed": True}
+    again = load_dataset(idtool.write_dataset(ds, tmp_path / "copy"))
+    assert again.extensions == ds.extensions
+
+
 @pytest.mark.parametrize("bad", ["nowhere", "file.txt", "empty_dir"])
 def test_bad_dataset_path(tmp_path, bad):
     (tmp_path / "file.txt").write_text("x")

@@ -2,6 +2,7 @@
 a headless Chromium screenshot where Chromium is installed (CI installs it)."""
 
 import base64
+import dataclasses
 import html
 import io
 import json
@@ -26,6 +27,7 @@ def fitted(tmp_path_factory):
     params["experiments"]["normal_loads_n"] = [270.0, 670.0]
     params["experiments"]["on_durations_s"] = [2.0]
     dataset, _ = idtool.simulate_bench(params, seed=31)
+    dataset = dataclasses.replace(dataset, extensions={"x_operator": "J. Doe", "x_job": 4711})
     data = idtool.write_dataset(dataset, root / "data")
     out = root / "fits" / "r"
     assert main(["fit", str(data), "--out", str(out)]) == 0
@@ -56,7 +58,7 @@ def test_report_with_a_posterior_shows_it(fitted, sampled_report):
     # posterior predictive check and walkers replace the fit-only figures
     assert len(images_of(page)) == len(images_of((fitted / "report.html").read_text())) + 1
     assert (sampled_report / "figures" / "walkers.png").is_file()
-    assert "&quot;converged&quot;: false" in page  # 150 steps: reported unconverged
+    assert "<td>converged</td><td>False</td>" in page  # 150 steps: reported unconverged
     assert "Draws: posterior" in page
     # ... and said first, above every section, in a banner
     banner = page.index('<p class="banner">The posterior chain did NOT converge')
@@ -171,3 +173,138 @@ def test_report_renders_in_headless_chromium(fitted, tmp_path):
     assert pixels.shape[0] >= 2000 and pixels.shape[1] >= 1100
     # Rendered content, not an empty page: many distinct colours.
     assert np.unique(pixels.reshape(-1, pixels.shape[-1]), axis=0).shape[0] > 50
+
+
+def _answer(page: str) -> str:
+    return page.split('<section id="answer">')[1].split("</section>")[0]
+
+
+def test_the_answer_comes_first_with_its_bands(fitted):
+    """The first section gives FR, reduction and a next pull's band at every tested load
+    x amplitude (270/670 N x 50/70%), the numbers of idtool's own prediction from the
+    same draws, and what the traces measured there; then the amplitude for 30 and 50%."""
+    from idtool._fit._store import load_stored_fit
+    from idtool._predict._predict import prediction_draws
+    from idtool._predict._tables import predict_table
+
+    page = (fitted / "report.html").read_text()
+    assert page.index("<section") == page.index('<section id="answer">')
+    answer = _answer(page)
+    rows = re.findall(r"<tr>(.*?)</tr>", answer.split("Commanded amplitude")[0])[1:]
+    assert len(rows) == 4
+    fit = load_stored_fit(fitted)
+    draws = prediction_draws(fit, max_draws=400)
+    doc = json.loads((fitted / "fit.json").read_text())
+    for row, p in zip(
+        rows, predict_table(draws, fit.model.data, [270.0, 670.0], [0.5, 0.7]), strict=True
+    ):
+        cells = re.findall(r"<td>(.*?)</td>", row)
+        assert cells[0] == f"{p.normal_load_n:g}"
+        assert cells[4] == f"{p.median:.3f} [{p.ci95[0]:.3f}, {p.ci95[1]:.3f}]"
+        red, (rlo, rhi) = p.reduction_percent
+        assert cells[5] == f"{red:.1f} [{rlo:.1f}, {rhi:.1f}]"
+        nlo, nhi = p.new_trace[1]
+        assert cells[6] == f"[{nlo:.3f}, {nhi:.3f}]" and nlo <= p.ci95[0] and nhi >= p.ci95[1]
+        own = [
+            t["free_friction_ratio"]["estimate"]
+            for t in doc["traces"]
+            if t["normal_load_n"] == p.normal_load_n
+            and t["amplitude_fraction"] == p.amplitude_fraction
+        ]
+        assert cells[2] == str(len(own)) and cells[3].startswith(f"{np.mean(own):.3f}")
+    amp = answer.split("Commanded amplitude")[1]
+    assert "amplitude for 30% reduction [95%]" in amp and "amplitude for 50% reduction" in amp
+    assert len(re.findall(r"<tr>", amp)) == 1 + 2  # the tested loads
+
+
+def test_the_header_names_data_date_id_and_the_labs_fields(fitted, sampled_report):
+    page = (fitted / "report.html").read_text()
+    header = page.split("<h1>")[1].split("<section")[0]
+    ds = idtool.load_dataset(fitted.parent.parent / "data")
+    for text in (ds.sha256, ds.material, "x_operator", "J. Doe", "x_job", "4711", " UTC"):
+        assert html.escape(text) in header, text
+    rid = re.search(r"IDT-[0-9A-F]{12}", header).group(0)
+    # the same fit and options: the same id; a posterior or other options: another
+    other = (sampled_report / "report.html").read_text()
+    assert rid not in other and re.search(r"IDT-[0-9A-F]{12}", other)
+    assert "<h2>Sign-off</h2>" in page and "Approved by" in page
+    assert page.rindex("<h2>Sign-off</h2>") > page.index("<h2>Provenance</h2>")
+
+
+def test_report_options_targets_and_loads(fitted, tmp_path, capsys):
+    folder = tmp_path / "r"
+    shutil.copytree(fitted, folder)
+    rid = re.search(r"IDT-[0-9A-F]{12}", (folder / "report.html").read_text()).group(0)
+    assert main(["report", str(folder)]) == 0
+    assert rid in (folder / "report.html").read_text()  # same inputs, same id
+    assert main(["report", str(folder), "--targets", "40", "--loads", "450,1000"]) == 0
+    page = (folder / "report.html").read_text()
+    assert rid not in page
+    answer = _answer(page)
+    assert "amplitude for 40% reduction" in answer and "30% reduction" not in answer
+    assert "<td>450</td>" in answer and "<td>1000 (extrapolated)</td>" in answer
+    banners = page.split('<section id="answer">')[0]
+    assert "Extrapolated answer: normal load 1000 lies outside the fitted range" in banners
+    assert "normal load 450 " not in banners  # inside the tested range
+    capsys.readouterr()
+    assert main(["report", str(folder), "--targets", "120"]) == 2
+    assert "targets: 120% is not a reduction in (0, 100)" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as usage:  # argparse's usage error
+        main(["report", str(folder), "--loads", "abc"])
+    assert usage.value.code == 2 and "'abc' is not a number" in capsys.readouterr().err
+
+
+def _chromium(tmp_path: Path, *args: str) -> str:
+    """Headless Chromium with a fresh profile under ``tmp_path``; its stdout."""
+    argv = ["chromium", "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run"]
+    argv += [f"--user-data-dir={tmp_path / 'profile'}", *args]
+    return subprocess.run(argv, check=True, capture_output=True, text=True, timeout=120).stdout
+
+
+def _layout(page: Path, tmp_path: Path, script: str) -> str:
+    """What ``script`` (JS, an expression) gives on ``page`` laid out in a 1200 x 900
+    headless Chromium window."""
+    probe = tmp_path / "probe.html"
+    probe.write_text(
+        page.read_text().replace(
+            "</body>",
+            f"<script>document.body.setAttribute('data-probe', {script});</script></body>",
+        )
+    )
+    out = _chromium(tmp_path, "--window-size=1200,900", "--dump-dom", probe.as_uri())
+    return re.search(r'data-probe="([^"]*)"', out).group(1)
+
+
+@pytest.mark.skipif(shutil.which("chromium") is None, reason="Debian's chromium is not installed")
+def test_the_first_screen_holds_the_answer_table(sampled_report, tmp_path):
+    """Under the header and the banners (here: an unconverged chain), the answer's
+    friction-ratio table ends within the 900 px a reader sees before scrolling."""
+    bottom = _layout(
+        sampled_report / "report.html",
+        tmp_path,
+        "document.querySelector('#answer table').getBoundingClientRect().bottom",
+    )
+    assert 0 < float(bottom) <= 900
+
+
+@pytest.mark.skipif(shutil.which("pdftotext") is None, reason="poppler-utils not installed")
+@pytest.mark.skipif(shutil.which("chromium") is None, reason="Debian's chromium is not installed")
+def test_printing_puts_the_answer_alone_on_page_one(fitted, tmp_path):
+    pdf = tmp_path / "r.pdf"
+    _chromium(
+        tmp_path,
+        "--no-pdf-header-footer",
+        f"--print-to-pdf={pdf}",
+        (fitted / "report.html").as_uri(),
+    )
+
+    def text(first: int, last: int) -> str:
+        args = ["pdftotext", "-f", str(first), "-l", str(last), "-layout", str(pdf), "-"]
+        return subprocess.run(args, check=True, capture_output=True, text=True).stdout
+
+    page1 = text(1, 1)
+    assert "Answer" in page1 and "amplitude for 50% reduction" in page1
+    assert "Estimates" not in page1
+    assert text(2, 2).lstrip().startswith("Dataset")
+    info = subprocess.run(["pdfinfo", str(pdf)], capture_output=True, text=True).stdout
+    assert "pts (A4)" in info

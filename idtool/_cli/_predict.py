@@ -6,22 +6,10 @@ import argparse
 import json
 import math
 
+from idtool._cli._args import number_list
 from idtool._errors import IdtoolError
 
 __all__ = ["register"]
-
-
-def _numbers(text: str) -> list[float]:
-    out = []
-    for part in text.split(","):
-        try:
-            value = float(part)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{part!r} is not a number") from None
-        if not math.isfinite(value):
-            raise argparse.ArgumentTypeError(f"{part!r} is not a finite number")
-        out.append(value)
-    return out
 
 
 def _check(name: str, values: list[float], lo: float, hi: float, closed_hi: bool) -> None:
@@ -97,9 +85,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "it is out of reach.",
     )
     p.add_argument("fit", help="fit folder, e.g. fits/NAME")
-    p.add_argument("--load", type=_numbers, required=True, help="normal load(s) [N], e.g. 450,670")
-    p.add_argument("--amplitude", type=_numbers, help="commanded amplitude fraction(s) in (0, 1]")
-    p.add_argument("--speed", type=_numbers, help="pull speed(s) [m/s] (default: the fit's)")
+    p.add_argument(
+        "--load", type=number_list, required=True, help="normal load(s) [N], e.g. 450,670"
+    )
+    p.add_argument(
+        "--amplitude", type=number_list, help="commanded amplitude fraction(s) in (0, 1]"
+    )
+    p.add_argument("--speed", type=number_list, help="pull speed(s) [m/s] (default: the fit's)")
     p.add_argument(
         "--target-reduction", type=float, help="friction reduction [%%] to find the amplitude for"
     )

@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import argparse
 
+from idtool._cli._args import number_list
+
 __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
-    from idtool._report._html import write_report
+    from idtool._report._html import TARGETS, write_report
 
-    path = write_report(args.fit)
+    path = write_report(args.fit, targets=args.targets or TARGETS, loads_n=args.loads or ())
     print(f"report: {path}")
     return 0
 
@@ -19,10 +21,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "report",
         help="write fits/NAME/report.html (self-contained, opens offline)",
-        description="Uncertainty report of a fit (and its posterior, if sampled): "
-        "estimates, correlations, traces, residuals, corner plot, convergence, friction "
-        "ratio against amplitude and load, amplitude needed for a target reduction, model "
-        "comparison, provenance. Also figures/*.png and report.md.",
+        description="Uncertainty report of a fit (and its posterior, if sampled). First "
+        "the answer: the friction ratio and reduction at each tested load and amplitude "
+        "with 95%% bands, and the amplitude needed for each target reduction; then "
+        "banners for an unconverged chain, misfit or extrapolation; then the evidence "
+        "(estimates, correlations, traces, residuals, corner plot, convergence, curves, "
+        "model comparison, provenance) and a sign-off block. Also figures/*.png and "
+        "report.md. Prints cleanly to PDF from a browser.",
     )
     p.add_argument("fit", help="a fit folder made by 'idtool fit'")
+    p.add_argument(
+        "--targets",
+        type=number_list,
+        help="target friction reductions [%%] for the amplitude table, e.g. 30,50 (default)",
+    )
+    p.add_argument(
+        "--loads",
+        type=number_list,
+        help="normal loads [N] at which to give the amplitude too, besides the tested "
+        "ones, e.g. 300,800 (outside the tested range: flagged as extrapolation)",
+    )
     p.set_defaults(func=_run)

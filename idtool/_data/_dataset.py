@@ -94,6 +94,9 @@ class Dataset:
         sha256: :func:`dataset_sha256` of dataset.json and the trace files' bytes.
         warnings: problems of severity ``"warning"`` (legal but suspicious values).
         description: optional free text from dataset.json.
+        extensions: the top-level ``x_*`` fields of dataset.json (the lab's own: operator,
+            job number, webbing batch...), in file order; idtool's models ignore them,
+            reports show them.
         path: the folder it was loaded from (None if built in memory).
     """
 
@@ -105,6 +108,7 @@ class Dataset:
     warnings: tuple[Problem, ...] = ()
     description: str | None = None
     path: Path | None = None
+    extensions: Mapping[str, Any] = dataclasses.field(default_factory=dict)
 
     def trace(self, trace_id: str) -> Trace:
         """The trace named ``trace_id``."""
@@ -269,6 +273,7 @@ def _assemble(json_bytes: bytes, read: Reader, root: Path | None, label: str) ->
         warnings=tuple(_located(problems, root)),
         description=document.get("description"),
         path=root,
+        extensions={k: v for k, v in document.items() if k.startswith("x_")},
     )
 
 

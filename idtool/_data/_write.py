@@ -52,9 +52,15 @@ def trace_entry(
 
 
 def document(
-    name: str, material: str, rig: Rig, entries: list[dict[str, Any]], description: str | None
+    name: str,
+    material: str,
+    rig: Rig,
+    entries: list[dict[str, Any]],
+    description: str | None,
+    extensions: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """A dataset.json document, fields in the order of the schema."""
+    """A dataset.json document, fields in the order of the schema, then the ``x_*``
+    extension fields."""
     out: dict[str, Any] = {"schema_version": "1", "name": name, "material": material}
     if description is not None:
         out["description"] = description
@@ -65,16 +71,28 @@ def document(
     if rig.mains_frequency_hz is not None:
         out["rig"]["mains_frequency_hz"] = rig.mains_frequency_hz
     out["traces"] = entries
+    for key, value in (extensions or {}).items():
+        if not key.startswith("x_"):
+            raise ValueError(f"extensions: {key!r} is not an extension field (x_...)")
+        out[key] = value
     return out
 
 
 def dataset_document(dataset: Dataset) -> dict[str, Any]:
-    """The dataset.json content of ``dataset`` (``x_`` extension fields are not kept)."""
+    """The dataset.json content of ``dataset``, its top-level ``x_*`` fields kept (those
+    of the rig and the traces are not)."""
     entries = [
         trace_entry(t.id, t.file, t.normal_load_n, t.amplitude_fraction, t.pull_speed_m_s, t.notes)
         for t in dataset.traces
     ]
-    return document(dataset.name, dataset.material, dataset.rig, entries, dataset.description)
+    return document(
+        dataset.name,
+        dataset.material,
+        dataset.rig,
+        entries,
+        dataset.description,
+        dataset.extensions,
+    )
 
 
 def json_bytes(document: Mapping[str, Any]) -> bytes:

@@ -242,7 +242,7 @@ def extrapolation_notes(data: FitData, loads_n=(), amplitudes=(), speeds_m_s=())
         ("pull speed", speeds_m_s, data.pull_speed_m_s),
     ):
         lo, hi = float(np.min(seen)), float(np.max(seen))
-        out = [f"{v:.3g}" for v in given if v < lo * (1 - 1e-9) or v > hi * (1 + 1e-9)]
+        out = [f"{v:.4g}" for v in given if v < lo * (1 - 1e-9) or v > hi * (1 + 1e-9)]
         if out:
             vals = ", ".join(out)
             notes.append(

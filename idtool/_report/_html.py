@@ -1,28 +1,45 @@
 """``fits/NAME/report.html``: one self-contained uncertainty report (images embedded).
 
 Built from what ``idtool fit`` and ``idtool sample`` left in the folder; the same figures
-are written as PNG files under ``figures/`` and a short ``report.md`` sums it up.
-Sections without their inputs (no posterior yet) say what to run instead of vanishing.
+are written as PNG files under ``figures/`` and a short ``report.md`` sums it up. The
+first screen is the answer (:mod:`idtool._report._answer`) under a header that names
+the data, the date and the report id, and any verdict banners; the evidence follows,
+and a sign-off block closes it. Sections without their inputs (no posterior yet) say
+what to run instead of vanishing.
 """
 
 from __future__ import annotations
 
-import base64
 import html
 import json
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from idtool._atomic import atomic_output_dir, write_text_atomic
+from idtool._errors import IdtoolError
 from idtool._fit._store import load_stored_fit
 from idtool._fit._variability import MISFIT
 from idtool._posterior._store import POSTERIOR_FILE
 from idtool._predict._predict import prediction_draws
+from idtool._report._answer import answer
+from idtool._report._page import (
+    g,
+    img,
+    kv_table,
+    now_utc,
+    options_bytes,
+    page,
+    report_id,
+    signoff,
+    table,
+)
 
 __all__ = ["SECTIONS", "write_report"]
 
 SECTIONS = (
+    "Answer",
     "Dataset",
     "Estimates",
     "Correlations",
@@ -35,25 +52,9 @@ SECTIONS = (
     "Model comparison",
     "Warnings",
     "Provenance",
+    "Sign-off",
 )
 TARGETS = (30.0, 50.0)
-
-
-def _img(path: Path, alt: str) -> str:
-    data = base64.b64encode(path.read_bytes()).decode("ascii")
-    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{data}">'
-
-
-def _table(header: list[str], rows: list[list]) -> str:
-    head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
-    body = "".join(
-        "<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in row) + "</tr>" for row in rows
-    )
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
-
-
-def _g(x: float) -> str:
-    return f"{x:.4g}"
 
 
 def _variability_table(doc: dict) -> str:
@@ -75,7 +76,7 @@ def _variability_table(doc: dict) -> str:
         "each sd's REML likelihood times a prior that gives 'zero' probability 1/2). "
         f"Lack of fit of the physical model: chi2 = {lof['chi2']:.1f} "
         f"on {lof['dof']} dof, p = {lof['p_value']:.3g}.</p>"
-        + _table(["sd", "estimate", "95%"], rows)
+        + table(["sd", "estimate", "95%"], rows)
     )
 
 
@@ -90,10 +91,11 @@ def _posterior(folder: Path):
     return idata.posterior, json.loads(idata.posterior.attrs["idtool"])
 
 
-def _banners(doc: dict, meta: dict | None) -> str:
+def _banners(doc: dict, meta: dict | None, extrapolation: Sequence[str] = ()) -> str:
     """Verdicts that must be seen before anything else: a posterior chain that has not
-    converged (its columns, bands and plots are not to be trusted yet) and a physical
-    model that misses the data by more than their noise explains."""
+    converged (its columns, bands and plots are not to be trusted yet), a physical
+    model that misses the data by more than their noise explains, and answers that
+    extrapolate beyond the tested loads or amplitudes."""
     out = []
     if meta is not None and not meta["diagnostics"].get("converged", True):
         diag = meta["diagnostics"]
@@ -104,11 +106,59 @@ def _banners(doc: dict, meta: dict | None) -> str:
             "--resume --steps N, then report again."
         )
     out += [f"Model misfit: {w}" for w in doc["warnings"] if w.startswith(MISFIT)]
+    out += [f"Extrapolated answer: {n.removesuffix(': extrapolation')}" for n in extrapolation]
     return "".join(f'<p class="banner">{html.escape(b)}</p>' for b in out)
 
 
-def write_report(fit_folder: str | Path) -> Path:
-    """Write ``report.html``, ``report.md`` and ``figures/*.png`` into ``fit_folder``."""
+def _header(fit, meta: dict | None, rid: str) -> str:
+    """What a qualification file needs to know first: the material and data, when the
+    fit and this report were made, the report id, and the lab's own ``x_*`` fields."""
+    ds = fit.dataset
+    if meta is None:
+        posterior = "none (bands from the fit's covariance)"
+    else:
+        converged = meta["diagnostics"].get("converged")
+        posterior = f"{meta['diagnostics'].get('steps')} steps, " + (
+            "converged" if converged else "NOT converged"
+        )
+    rows = [
+        ["material", ds.material],
+        ["dataset", f"{ds.name}: {len(ds.traces)} traces; sha256 {ds.sha256}"],
+        ["description", ds.description or "-"],
+        ["fit", f"{fit.doc.get('created_utc', '-')}; {fit.doc['command']}"],
+        ["posterior", posterior],
+        ["report", f"{rid}, {now_utc()}, idtool {fit.doc['idtool_version']}"],
+    ]
+    rows += [[key, str(value)] for key, value in ds.extensions.items()]
+    return table(None, rows, cls="meta")
+
+
+def _report_id(folder: Path, targets: Sequence[float], loads_n: Sequence[float]) -> str:
+    parts = [(folder / "fit.json").read_bytes()]
+    if (folder / POSTERIOR_FILE).is_file():
+        parts.append((folder / POSTERIOR_FILE).read_bytes())
+    return report_id(*parts, options_bytes(targets=list(targets), loads_n=list(loads_n)))
+
+
+def write_report(
+    fit_folder: str | Path,
+    targets: Sequence[float] = TARGETS,
+    loads_n: Sequence[float] = (),
+) -> Path:
+    """Write ``report.html``, ``report.md`` and ``figures/*.png`` into ``fit_folder``.
+
+    Args:
+        fit_folder: a folder written by ``idtool fit`` (or :meth:`idtool.Fit.save`).
+        targets: friction reductions [%] for which the answer gives the amplitude needed.
+        loads_n: loads [N] at which to give it, besides the tested ones (those beyond
+            the tested range are flagged as extrapolation).
+    """
+    for t in targets:
+        if not 0.0 < t < 100.0:
+            raise IdtoolError(f"targets: {t:g}% is not a reduction in (0, 100)")
+    for load in loads_n:
+        if not load > 0.0:
+            raise IdtoolError(f"loads_n: {load:g} N is not a positive load")
     from idtool._report._figures import (
         amplitude_map_figure,
         corner_figure,
@@ -126,23 +176,26 @@ def write_report(fit_folder: str | Path) -> Path:
     draws = prediction_draws(fit, max_draws=400)
     names = list(fit.model.physical_names)
     speed = float(np.median(fit.model.data.pull_speed_m_s))
-    sec: dict[str, str] = {}
-    md: list[str] = [f"# idtool report: {fit.dataset.name}", ""]
+    rid = _report_id(folder, targets, loads_n)
+    first = answer(fit, draws, targets, loads_n)
+    sec: dict[str, str] = {"Answer": f'<div class="answer">{first.html}</div>'}
+    md: list[str] = [f"# idtool report: {fit.dataset.name}", "", f"Report {rid}", ""]
+    md += [*first.markdown, ""]
 
     with atomic_output_dir(folder / "figures", force=True) as figs:
         ds = fit.dataset
         sec["Dataset"] = (
-            f"<p>{html.escape(ds.name)}: {html.escape(ds.material)}; {len(ds.traces)} traces; "
+            f"<p>{html.escape(ds.name)}: {len(ds.traces)} traces; "
             f"horn {ds.rig.vibration_frequency_hz:g} Hz, max amplitude "
             f"{ds.rig.max_amplitude_m * 1e6:g} um; sha256 <code>{ds.sha256}</code></p>"
-            + _table(
+            + table(
                 ["trace", "load [N]", "amplitude", "speed [m/s]", "duration [s]", "ON [s]"],
                 [
                     [
                         t.id,
-                        _g(t.normal_load_n),
-                        _g(t.amplitude_fraction),
-                        _g(t.pull_speed_m_s),
+                        g(t.normal_load_n),
+                        g(t.amplitude_fraction),
+                        g(t.pull_speed_m_s),
                         f"{t.duration_s:.2f}",
                         ", ".join(f"{a:.2f}-{b:.2f}" for a, b in t.on_windows_s) or "none",
                     ]
@@ -151,27 +204,30 @@ def write_report(fit_folder: str | Path) -> Path:
             )
         )
         rows = []
+        meaning = {q.name: q.description for q in fit.model.shared_params}
         for n in names:
             p = doc["parameters"][n]
-            row = [n, p["unit"], _g(p["estimate"]), f"[{_g(p['ci95'][0])}, {_g(p['ci95'][1])}]"]
+            row = [n, meaning.get(n, ""), p["unit"], g(p["estimate"])]
+            row += [f"[{g(p['ci95'][0])}, {g(p['ci95'][1])}]"]
             if post is not None and n in post:
                 v = np.asarray(post[n].values).ravel()
                 lo, med, hi = np.percentile(v, [2.5, 50, 97.5])
-                row += [_g(med), f"[{_g(lo)}, {_g(hi)}]"]
+                row += [g(med), f"[{g(lo)}, {g(hi)}]"]
             else:
                 row += ["-", "no posterior: run idtool sample"]
             rows.append(row)
-        sec["Estimates"] = _table(
-            ["parameter", "unit", "fit", "fit 95%", "posterior median", "posterior 95%"], rows
+        sec["Estimates"] = table(
+            ["parameter", "meaning", "unit", "fit", "fit 95%", "posterior median", "posterior 95%"],
+            rows,
         )
         md += ["| parameter | fit | 95% | posterior 95% |", "|---|---|---|---|"]
-        md += [f"| {r[0]} [{r[1]}] | {r[2]} | {r[3]} | {r[5]} |" for r in rows]
+        md += [f"| {r[0]} [{r[2]}] | {r[3]} | {r[4]} | {r[6]} |" for r in rows]
 
         corr = doc["correlation"]
         cpath = correlation_figure(
             corr["names"], np.array(corr["matrix"]), figs / "correlation.png"
         )
-        sec["Correlations"] = _img(cpath, "correlation matrix")
+        sec["Correlations"] = img(cpath, "correlation matrix")
 
         traces_png = folder / ("ppc.png" if (folder / "ppc.png").is_file() else "traces.png")
         sec["Traces and posterior predictive check"] = (
@@ -179,8 +235,8 @@ def write_report(fit_folder: str | Path) -> Path:
             if traces_png.name == "ppc.png"
             else "<p>No posterior predictive check yet "
             "(run idtool sample); measured against fitted traces:</p>"
-        ) + _img(traces_png, "measured and fitted traces")
-        sec["Residuals"] = _img(folder / "residuals.png", "residuals and autocorrelation")
+        ) + img(traces_png, "measured and fitted traces")
+        sec["Residuals"] = img(folder / "residuals.png", "residuals and autocorrelation")
 
         corner_src = (
             {n: np.asarray(post[n].values).ravel() for n in names}
@@ -188,7 +244,7 @@ def write_report(fit_folder: str | Path) -> Path:
             else draws.values
         )
         kpath = corner_figure(corner_src, names, figs / "corner.png")
-        sec["Posterior: corner plot"] = f"<p>Draws: {html.escape(draws.note)}</p>" + _img(
+        sec["Posterior: corner plot"] = f"<p>Draws: {html.escape(draws.note)}</p>" + img(
             kpath, "corner plot"
         )
         if post is not None:
@@ -196,9 +252,7 @@ def write_report(fit_folder: str | Path) -> Path:
             chains = {n: np.asarray(post[n].values) for n in sampled}
             wpath = walker_figure(chains, sampled, figs / "walkers.png")
             diag = meta["diagnostics"]
-            sec["Sampling: walkers and convergence"] = (
-                f"<pre>{html.escape(json.dumps(diag, indent=1))}</pre>" + _img(wpath, "walkers")
-            )
+            sec["Sampling: walkers and convergence"] = kv_table(diag) + img(wpath, "walkers")
             md += ["", f"Sampling converged: {diag.get('converged')}"]
         else:
             sec["Sampling: walkers and convergence"] = "<p>No posterior: run idtool sample.</p>"
@@ -212,22 +266,20 @@ def write_report(fit_folder: str | Path) -> Path:
             "from that trace alone, with its 95% interval from its own noise (traces whose "
             "ON window ends before the force settles measure none).</p>"
             + _variability_table(doc)
-            + _img(p1, "FR against amplitude")
-            + _img(p2, "FR against load")
+            + img(p1, "FR against amplitude")
+            + img(p2, "FR against load")
         )
         loads = fit.model.data.normal_load_n
         grid = np.linspace(0.5 * loads.min(), 1.5 * loads.max(), 12)
-        apath, amp_rows = amplitude_map_figure(
-            draws, TARGETS, grid, speed, figs / "amplitude_map.png"
+        apath, _ = amplitude_map_figure(
+            draws, tuple(targets), grid, speed, figs / "amplitude_map.png"
         )
-        sec["Amplitude needed for a target reduction"] = _img(apath, "amplitude map") + (
-            "<ul>"
-            + "".join(f"<li>{html.escape(r.statement())}</li>" for r in amp_rows[::4])
-            + "</ul>"
+        sec["Amplitude needed for a target reduction"] = (
+            "<p>The amplitude needed against load (the answer's table gives it at the "
+            "tested loads).</p>" + img(apath, "amplitude map")
         )
-        md += ["", "Amplitude needed:"] + [f"- {r.statement()}" for r in amp_rows[::4]]
 
-        sec["Model comparison"] = f"<p>{html.escape(doc['choice'])}</p>" + _table(
+        sec["Model comparison"] = f"<p>{html.escape(doc['choice'])}</p>" + table(
             ["model", "AIC", "BIC", "log L", "parameters"],
             [
                 [
@@ -262,24 +314,13 @@ def write_report(fit_folder: str | Path) -> Path:
             if meta is None
             else {k: meta.get(k) for k in ("seed", "noise", "timing")},
         }
-        sec["Provenance"] = f"<pre>{html.escape(json.dumps(prov, indent=1))}</pre>"
+        sec["Provenance"] = kv_table(prov)
+        sec["Sign-off"] = signoff()
         md += ["", f"Dataset sha256 {ds.sha256}; fit command `{doc['command']}`"]
 
-    body = _banners(doc, meta) + "".join(
-        f'<section id="s{i}"><h2>{html.escape(name)}</h2>{sec[name]}</section>'
-        for i, name in enumerate(SECTIONS)
-    )
-    page = (
-        "<!DOCTYPE html><html><head><meta charset='utf-8'>"
-        f"<title>idtool report: {html.escape(fit.dataset.name)}</title><style>"
-        "body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}"
-        "table{border-collapse:collapse;font-size:0.85em}td,th{border:1px solid #ccc;"
-        "padding:2px 6px}img{max-width:100%;display:block;margin:0.5em 0}"
-        ".banner{border:2px solid #b00000;background:#fff0f0;padding:0.4em 1em;"
-        "margin:0.6em 0;font-weight:bold}"
-        "</style></head><body>"
-        f"<h1>idtool report: {html.escape(fit.dataset.name)}</h1>{body}</body></html>"
-    )
-    out = write_text_atomic(folder / "report.html", page)
+    title = f"idtool report: {fit.dataset.name}"
+    banners = _banners(doc, meta, first.extrapolation)
+    document = page(title, _header(fit, meta, rid), banners, {n: sec[n] for n in SECTIONS})
+    out = write_text_atomic(folder / "report.html", document)
     write_text_atomic(folder / "report.md", "\n".join(md) + "\n")
     return out
