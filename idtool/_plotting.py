@@ -4,13 +4,23 @@ A library function that writes a figure must not switch the caller's matplotlib
 backend (a notebook's inline plots would stop) nor leave figures in pyplot's registry:
 :func:`subplots` builds a bare ``matplotlib.figure.Figure``, whose ``savefig`` renders
 with Agg whatever the backend. matplotlib is imported here, on first use only.
+
+Print size: :func:`save_figure` renders at 96 dpi, CSS's pixels per inch, so a figure
+shown at its own size in report.html (it is at most :data:`MAX_WIDTH_IN` wide, under
+the report's column) shows its text at the point size it was drawn with; every text of
+the report's figures is at least :data:`MIN_FONT_PT` (tests/test_report.py checks).
 """
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any, Literal
 
-__all__ = ["subplots"]
+__all__ = ["DPI", "MAX_WIDTH_IN", "MIN_FONT_PT", "save_figure", "subplots"]
+
+DPI = 96
+MAX_WIDTH_IN = 11.0  # 1056 px: report.html's column is 1068 px, so never scaled down
+MIN_FONT_PT = 9.0
 
 
 def subplots(
@@ -22,5 +32,16 @@ def subplots(
     """``(figure, axes)`` as ``pyplot.subplots`` gives them, outside pyplot."""
     from matplotlib.figure import Figure
 
+    if figsize[0] > MAX_WIDTH_IN:
+        raise ValueError(f"figsize: {figsize[0]:g} in is wider than {MAX_WIDTH_IN:g} in")
     fig = Figure(figsize=figsize, layout=layout)
     return fig, fig.subplots(*args, **kw)
+
+
+def save_figure(fig, path: str | Path, *, tight: bool = True, **kw: Any) -> Path:
+    """Write ``fig`` to ``path`` at :data:`DPI` (``tight``: lay it out first); ``kw``
+    go to ``savefig`` (e.g. ``format`` for a temporary file name)."""
+    if tight:
+        fig.tight_layout()
+    fig.savefig(path, dpi=DPI, **kw)
+    return Path(path)

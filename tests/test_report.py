@@ -2,6 +2,7 @@
 a headless Chromium screenshot where Chromium is installed (CI installs it)."""
 
 import base64
+import contextlib
 import dataclasses
 import html
 import io
@@ -19,6 +20,44 @@ import idtool
 from idtool._cli._main import main
 from idtool._report._html import SECTIONS
 
+FIGURES: list[dict] = []  # every figure the fixtures' fit, sample and report save
+
+
+@contextlib.contextmanager
+def _recording_figures():
+    """Record what each saved figure shows at print size: its width and dpi, its
+    smallest text, its axis labels."""
+    from matplotlib.figure import Figure
+    from matplotlib.text import Text
+
+    original = Figure.savefig
+
+    def savefig(self, fname, *args, **kwargs):
+        out = original(self, fname, *args, **kwargs)  # draws: every tick label exists
+        texts = [t for t in self.findobj(Text) if t.get_visible() and t.get_text().strip()]
+        labels = [
+            label
+            for ax in self.axes
+            if ax.axison
+            for label in (ax.get_xlabel(), ax.get_ylabel())
+            if label
+        ]
+        FIGURES.append(
+            {
+                "name": Path(str(fname)).name,
+                "dpi": kwargs.get("dpi"),
+                "width_in": float(self.get_size_inches()[0]),
+                "smallest": min((t.get_fontsize(), t.get_text()) for t in texts),
+                "labels": labels,
+                "texts": [t.get_text() for t in texts],
+            }
+        )
+        return out
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(Figure, "savefig", savefig)
+        yield
+
 
 @pytest.fixture(scope="module")
 def fitted(tmp_path_factory):
@@ -30,8 +69,9 @@ def fitted(tmp_path_factory):
     dataset = dataclasses.replace(dataset, extensions={"x_operator": "J. Doe", "x_job": 4711})
     data = idtool.write_dataset(dataset, root / "data")
     out = root / "fits" / "r"
-    assert main(["fit", str(data), "--out", str(out)]) == 0
-    assert main(["report", str(out)]) == 0
+    with _recording_figures():
+        assert main(["fit", str(data), "--out", str(out), "--profile"]) == 0
+        assert main(["report", str(out)]) == 0
     return out
 
 
@@ -41,9 +81,32 @@ def sampled_report(fitted, tmp_path_factory):
     folder = tmp_path_factory.mktemp("report-posterior") / "r"
     shutil.copytree(fitted, folder)
     argv = ["sample", str(folder), "--walkers", "20", "--steps", "150", "--no-progress"]
-    assert main(argv) in (0, 3)  # 3: written, but too short to converge (the report says)
-    assert main(["report", str(folder)]) == 0
+    with _recording_figures():
+        assert main(argv) in (0, 3)  # 3: written, but too short to converge (the report says)
+        assert main(["report", str(folder)]) == 0
     return folder
+
+
+def test_figures_are_legible_at_print_size(fitted, sampled_report):
+    """Every figure of the fit, the posterior and the report is drawn at 96 dpi (CSS
+    pixels per inch) no wider than 11 in (under the report's 1068 px column: shown
+    unscaled at 100% zoom), so its text shows at the size it was drawn, all >= 9 pt;
+    every axis label carries its unit in brackets."""
+    names = {f["name"] for f in FIGURES}
+    expected = {"traces.png", "residuals.png", "profile.png", "ppc.png", "corner.png"}
+    assert expected | {"walkers.png", "fr_vs_load.png", "amplitude_map.png"} <= names
+    for f in FIGURES:
+        assert f["dpi"] == 96 and f["width_in"] <= 11.0, f["name"]
+        assert f["smallest"][0] >= 9.0, (f["name"], f["smallest"])
+        for label in f["labels"]:
+            assert re.search(r"\[[^\]]+\]", label), (f["name"], label)
+        assert any("[" in t for t in f["texts"]), f["name"]  # at least one unit
+
+
+def test_the_corner_plot_shows_each_interval(sampled_report):
+    corner = [f for f in FIGURES if f["name"] == "corner.png"][-1]
+    titles = [t for t in corner["texts"] if "95% [" in t]
+    assert len(titles) == 4 and any(t.startswith("Kt = ") for t in titles)
 
 
 def test_report_with_a_posterior_shows_it(fitted, sampled_report):
@@ -55,8 +118,10 @@ def test_report_with_a_posterior_shows_it(fitted, sampled_report):
     estimates = page.split("<h2>Estimates</h2>")[1].split("<h2>")[0]
     assert estimates.count("<tr>") == 1 + 4 and "no posterior" not in estimates
     assert estimates.count("[") == 2 * 4
-    # posterior predictive check and walkers replace the fit-only figures
-    assert len(images_of(page)) == len(images_of((fitted / "report.html").read_text())) + 1
+    # the posterior predictive check and the walkers join the fit's figures (the
+    # measured against the fitted traces stay)
+    assert len(images_of(page)) == len(images_of((fitted / "report.html").read_text())) + 2
+    assert 'alt="measured and fitted traces"' in page
     assert (sampled_report / "figures" / "walkers.png").is_file()
     assert "<td>converged</td><td>False</td>" in page  # 150 steps: reported unconverged
     assert "Draws: posterior" in page

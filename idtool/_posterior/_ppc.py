@@ -120,12 +120,12 @@ def posterior_predictive(
 
 def plot_predictive(check: PredictiveCheck, trace_ids: tuple[str, ...], path: str | Path) -> Path:
     """``ppc.png``: every trace with its bands, and the autocorrelation check."""
-    from idtool._plotting import subplots
+    from idtool._plotting import MAX_WIDTH_IN, save_figure, subplots
 
     n = len(trace_ids)
     cols = 4
     rows = int(np.ceil((n + 1) / cols))
-    fig, axes = subplots(rows, cols, figsize=(14, 2.3 * rows), squeeze=False)
+    fig, axes = subplots(rows, cols, figsize=(MAX_WIDTH_IN, 2.4 * rows + 1.0), squeeze=False)
     lo, hi = check.band
     mlo, mhi = check.model_band
     med = check.median
@@ -140,18 +140,19 @@ def plot_predictive(check: PredictiveCheck, trace_ids: tuple[str, ...], path: st
         ax.fill_between(t, lo[sel] - m, hi[sel] - m, alpha=0.25, label="95% predictive", **band)
         ax.fill_between(t, mlo[sel] - m, mhi[sel] - m, alpha=0.7, label="95% model", **band)
         ax.plot(t, check.measured[sel] - m, ".", ms=1.5, color="k", label="measured")
-        ax.set_title(trace_ids[i], fontsize=8)
-        ax.tick_params(labelsize=7)
-    axes.flat[0].legend(fontsize=6, loc="lower right")
+        ax.set_title(trace_ids[i], fontsize=9)
+        ax.tick_params(labelsize=9)
+        ax.locator_params(nbins=3)
+    axes.flat[0].legend(fontsize=9, loc="lower right")
     ax = axes.flat[n]
     ax.axis("on")
     r_lo, r_hi = check.lag1_replicated
     ax.axvspan(r_lo, r_hi, color="C3", alpha=0.3, label="replicated 95%")
     ax.axvline(check.lag1_measured, color="k", label="measured")
     ax.set(xlim=(min(r_lo, check.lag1_measured) - 0.1, max(r_hi, check.lag1_measured) + 0.1))
-    ax.set_title(f"lag-1 autocorrelation (p = {check.lag1_p_value:.2f})", fontsize=8)
-    ax.legend(fontsize=6)
-    ax.tick_params(labelsize=7)
+    ax.set_title(f"lag-1 autocorrelation (p = {check.lag1_p_value:.2f})", fontsize=9)
+    ax.legend(fontsize=9)
+    ax.tick_params(labelsize=9)
     ax.set_yticks([])
     fig.suptitle(
         "Posterior predictive check: measured block means minus the posterior median trace,\n"
@@ -159,10 +160,10 @@ def plot_predictive(check: PredictiveCheck, trace_ids: tuple[str, ...], path: st
         f"{100 * check.inside_fraction:.1f}% inside the predictive band",
         fontsize=9,
     )
-    fig.supxlabel("time [s]")
+    fig.supxlabel("time [s]; last panel: lag-1 autocorrelation [-]")
     fig.supylabel("force - posterior median [N] (block means)")
     fig.tight_layout(rect=(0, 0, 1, 0.98))
     path = Path(path)
     with atomic_file(path) as tmp:
-        fig.savefig(tmp, dpi=90, format="png")
+        save_figure(fig, tmp, tight=False, format="png")
     return path

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from idtool._plotting import subplots
+from idtool._plotting import MAX_WIDTH_IN, save_figure, subplots
 from idtool._predict._predict import Draws, amplitude_for_reduction, predict_friction_ratio
 
 __all__ = [
@@ -18,30 +18,38 @@ __all__ = [
 ]
 
 
-def _save(fig, path: Path, dpi: int = 90) -> Path:
-    fig.tight_layout()
-    fig.savefig(path, dpi=dpi)
-    return path
+def _save(fig, path: Path) -> Path:
+    return save_figure(fig, path)
+
+
+def _label(name: str, unit: str) -> str:
+    """An axis label with its unit: ``Kt [N/m]``, dimensionless as ``[-]``."""
+    return f"{name} [{'-' if unit in ('', '1') else unit}]"
 
 
 def correlation_figure(names: list[str], matrix: np.ndarray, path: Path) -> Path:
     """Heat map of the fit's correlation matrix, values written in the cells."""
     n = len(names)
-    fig, ax = subplots(figsize=(1.1 * n + 2, 1.0 * n + 1.5))
+    fig, ax = subplots(figsize=(min(1.1 * n + 2.5, MAX_WIDTH_IN), min(1.0 * n + 2.0, 11.0)))
     im = ax.imshow(matrix, vmin=-1, vmax=1, cmap="RdBu_r")
-    ax.set_xticks(range(n), names, rotation=40, ha="right", fontsize=8)
-    ax.set_yticks(range(n), names, fontsize=8)
+    ax.set_xticks(range(n), names, rotation=40, ha="right")
+    ax.set_yticks(range(n), names)
     for i in range(n):
         for j in range(n):
-            ax.text(j, i, f"{matrix[i, j]:+.2f}", ha="center", va="center", fontsize=7)
-    fig.colorbar(im, ax=ax, shrink=0.8)
+            ax.text(j, i, f"{matrix[i, j]:+.2f}", ha="center", va="center", fontsize=9)
+    bar = fig.colorbar(im, ax=ax, shrink=0.8)
+    bar.set_label("correlation [-]")
     return _save(fig, path)
 
 
-def corner_figure(values: dict[str, np.ndarray], names: list[str], path: Path) -> Path:
-    """Corner plot: 1-D histograms on the diagonal, 2-D scatter below it."""
+def corner_figure(
+    values: dict[str, np.ndarray], names: list[str], units: dict[str, str], path: Path
+) -> Path:
+    """Corner plot: 1-D histograms on the diagonal, titled with the median and the 95%
+    interval (dashed lines at its ends), 2-D scatter below it; axes in ``units``."""
     n = len(names)
-    fig, axes = subplots(n, n, figsize=(2.1 * n, 2.1 * n), squeeze=False)
+    side = min(2.3 * n, MAX_WIDTH_IN)
+    fig, axes = subplots(n, n, figsize=(side, side), squeeze=False)
     for i, yi in enumerate(names):
         for j, xj in enumerate(names):
             ax = axes[i, j]
@@ -49,29 +57,41 @@ def corner_figure(values: dict[str, np.ndarray], names: list[str], path: Path) -
                 ax.axis("off")
                 continue
             if i == j:
+                lo, med, hi = np.percentile(values[xj], [2.5, 50.0, 97.5])
                 ax.hist(values[xj], bins=40, color="C0", alpha=0.8)
+                for q in (lo, hi):
+                    ax.axvline(q, color="k", ls="--", lw=0.8)
+                unit = units.get(xj, "")
+                unit = "" if unit in ("", "1") else f" {unit}"
+                ax.set_title(f"{xj} = {med:.3g}{unit}\n95% [{lo:.3g}, {hi:.3g}]", fontsize=9)
                 ax.set_yticks([])
             else:
                 ax.plot(values[xj], values[yi], ",", alpha=0.3, color="C0")
+            ax.locator_params(nbins=3)
+            ax.tick_params(labelsize=9)
             if i == n - 1:
-                ax.set_xlabel(xj, fontsize=8)
+                ax.set_xlabel(_label(xj, units.get(xj, "")))
+                ax.tick_params(axis="x", labelrotation=45)
             else:
                 ax.set_xticklabels([])
             if j == 0 and i > 0:
-                ax.set_ylabel(yi, fontsize=8)
-            ax.tick_params(labelsize=6)
-    return _save(fig, path, dpi=80)
+                ax.set_ylabel(_label(yi, units.get(yi, "")))
+            elif j > 0:
+                ax.set_yticklabels([])
+    return _save(fig, path)
 
 
-def walker_figure(chains: dict[str, np.ndarray], names: list[str], path: Path) -> Path:
+def walker_figure(
+    chains: dict[str, np.ndarray], names: list[str], units: dict[str, str], path: Path
+) -> Path:
     """Every walker's path per parameter (``chains[name]`` is walkers x steps)."""
-    fig, axes = subplots(len(names), 1, figsize=(10, 1.5 * len(names)), sharex=True)
+    fig, axes = subplots(len(names), 1, figsize=(10, 1.6 * len(names)), sharex=True)
     for ax, name in zip(np.atleast_1d(axes), names, strict=True):
         ax.plot(chains[name].T, lw=0.3, alpha=0.5, color="k")
-        ax.set_ylabel(name, fontsize=8)
-        ax.tick_params(labelsize=7)
-    np.atleast_1d(axes)[-1].set_xlabel("step (after burn-in)")
-    return _save(fig, path, dpi=80)
+        ax.set_ylabel(_label(name, units.get(name, "")), rotation=0, ha="right", va="center")
+        ax.locator_params(axis="y", nbins=3)
+    np.atleast_1d(axes)[-1].set_xlabel("step after burn-in [steps]")
+    return _save(fig, path)
 
 
 def friction_ratio_figures(
@@ -130,7 +150,7 @@ def friction_ratio_figures(
             "tested",
             ha="center",
             va="bottom",
-            fontsize=8,
+            fontsize=9,
             color="0.35",
         )
         for c, value in enumerate(groups):
@@ -139,7 +159,7 @@ def friction_ratio_figures(
             ax.fill_between(x_grid, lo, hi, color=f"C{c}", alpha=0.35, lw=0)
             ax.plot(x_grid, med, color=f"C{c}", label=label(value))
             marks(ax, key, value, x_key)
-        ax.set(xlabel=xlabel, ylabel="friction ratio FR", ylim=(0, 1.05))
+        ax.set(xlabel=xlabel, ylabel="friction ratio FR [-]", ylim=(0, 1.05))
         ax.legend(title=title)
         ax.set_title(
             "dark: mean FR 95%; light: next pull 95%; points: each trace;\n"
@@ -155,7 +175,7 @@ def friction_ratio_figures(
         "normal_load_n",
         "amplitude_fraction",
         lambda load: f"{load:g} N",
-        "commanded amplitude fraction",
+        "commanded amplitude fraction [-]",
         "normal load",
         out / "fr_vs_amplitude.png",
         alphas,
@@ -192,6 +212,6 @@ def amplitude_map_figure(
         ax.fill_between(loads, lo, hi, color=f"C{c}", alpha=0.25)
         ax.plot(loads, med, color=f"C{c}", label=f"{target:g}% reduction")
     ax.axhline(1.0, color="k", lw=0.8, ls="--")
-    ax.set(xlabel="normal load [N]", ylabel="amplitude fraction needed", ylim=(0, 1.1))
+    ax.set(xlabel="normal load [N]", ylabel="amplitude fraction needed [-]", ylim=(0, 1.1))
     ax.legend()
     return _save(fig, path), rows

@@ -269,39 +269,46 @@ def fit_report(run: FitRun) -> str:
 
 
 def plot_fit(run: FitRun, out_dir: str | Path) -> list[Path]:
-    """``traces.png`` (data and fit), ``residuals.png`` and, if profiled, ``profile.png``."""
-    from idtool._plotting import subplots
+    """``traces.png`` (data and fit, with the 95% band of the block means' noise around
+    the fit: +-1.96 sigma_n / sqrt(1 - phi^2), the AR(1) noise's stationary sd),
+    ``residuals.png`` and, if profiled, ``profile.png``."""
+    from idtool._plotting import MAX_WIDTH_IN, save_figure, subplots
 
     r, d = run.chosen, run.data
     out = Path(out_dir)
     pred = np.asarray(_predict(r.model, jnp.asarray(r.z)))
     resid = d.force_n - pred
+    half = 1.96 * r.sigma_n / np.sqrt(1.0 - min(r.phi**2, 0.999))
     cols = 4
     rows = int(np.ceil(d.n_traces / cols))
-    fig, axes = subplots(rows, cols, figsize=(14, 2.2 * rows), sharex=False, squeeze=False)
+    height = 2.3 * rows + 0.9
+    fig, axes = subplots(rows, cols, figsize=(MAX_WIDTH_IN, height), sharex=False, squeeze=False)
     # Fixed margins rather than tight_layout, and few ticks: laying out and ticking 24
     # panels was 2 of the 3 s this figure took, most of a repeated fit's time.
-    top = 1.0 - 0.35 / (2.2 * rows)
-    fig.subplots_adjust(left=0.06, right=0.99, bottom=0.6 / (2.2 * rows) + 0.02, top=top)
-    fig.subplots_adjust(hspace=0.45, wspace=0.18)
+    fig.subplots_adjust(left=0.08, right=0.99, bottom=0.5 / height, top=1.0 - 0.75 / height)
+    fig.subplots_adjust(hspace=0.5, wspace=0.3)
     for i, ax in enumerate(axes.flat):
         if i >= d.n_traces:
             ax.axis("off")
             continue
         sel = d.block_trace == i
-        ax.plot(d.block_time_s[sel], d.force_n[sel], ".", ms=2, color="0.5", label="data")
-        ax.plot(d.block_time_s[sel], pred[sel], "-", lw=1.2, color="C3", label="fit")
-        ax.set_title(d.trace_ids[i], fontsize=8, pad=2)
-        ax.tick_params(labelsize=7)
-        ax.locator_params(nbins=4)
-    axes.flat[0].legend(fontsize=7)
-    fig.supxlabel("time [s]", fontsize=9)
-    fig.supylabel("force [N] (block means)", fontsize=9)
+        t, p = d.block_time_s[sel], pred[sel]
+        ax.fill_between(t, p - half, p + half, color="C3", alpha=0.25, lw=0, label="95% noise")
+        ax.plot(t, d.force_n[sel], ".", ms=2, color="0.4", label="measured")
+        ax.plot(t, p, "-", lw=1.0, color="C3", label="fit")
+        ax.set_title(d.trace_ids[i], fontsize=9, pad=2)
+        ax.tick_params(labelsize=9)
+        ax.locator_params(nbins=3)
+    # above the panels, where it hides no data
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="upper center", ncol=3, fontsize=9, frameon=False)
+    fig.supxlabel("time [s]", fontsize=10)
+    fig.supylabel("force [N] (block means)", fontsize=10)
     paths = [out / "traces.png"]
-    fig.savefig(paths[-1], dpi=90)
+    save_figure(fig, paths[-1], tight=False)
 
     w = np.asarray(_residuals(r.model, jnp.asarray(r.z), r.phi))
-    fig, (a1, a2, a3) = subplots(1, 3, figsize=(14, 3.5))
+    fig, (a1, a2, a3) = subplots(1, 3, figsize=(MAX_WIDTH_IN, 3.6))
     for i in range(d.n_traces):
         sel = d.block_trace == i
         a1.plot(d.block_time_s[sel], resid[sel], lw=0.5)
@@ -312,24 +319,25 @@ def plot_fit(run: FitRun, out_dir: str | Path) -> list[Path]:
         acf = [np.sum(s[k:] * s[:-k]) / np.sum(s * s) for k in lags]
         a2.plot(lags, acf, marker=".", label=label)
     a2.axhline(0, color="k", lw=0.5)
-    a2.set(xlabel="lag [blocks]", ylabel="autocorrelation", title="residual autocorrelation")
+    a2.set(xlabel="lag [blocks]", ylabel="autocorrelation [-]", title="autocorrelation")
     a2.legend()
     a3.hist(w / r.sigma_n, bins=60, density=True, color="0.6")
     x = np.linspace(-4, 4, 200)
     a3.plot(x, np.exp(-(x**2) / 2) / np.sqrt(2 * np.pi), "C3")
-    a3.set(xlabel="whitened residual / sigma", title="whitened residuals vs N(0, 1)")
-    fig.tight_layout()
-    paths.append(out / "residuals.png")
-    fig.savefig(paths[-1], dpi=90)
+    a3.set(
+        xlabel="whitened residual / sigma [-]",
+        ylabel="density [-]",
+        title="whitened vs N(0, 1)",
+    )
+    paths.append(save_figure(fig, out / "residuals.png"))
 
     if run.profiles:
         n = len(run.profiles)
-        fig, axes = subplots(1, n, figsize=(3.5 * n, 3), squeeze=False)
+        fig, axes = subplots(1, n, figsize=(min(3.5 * n, MAX_WIDTH_IN), 3), squeeze=False)
         for ax, prof in zip(axes.flat, run.profiles.values(), strict=True):
+            unit = r.estimates[prof.name].unit
             ax.plot(prof.values, prof.delta, marker="o")
             ax.axhline(3.84, color="C3", ls="--", lw=0.8)
-            ax.set(xlabel=prof.name, ylabel="rise of -2 log L")
-        fig.tight_layout()
-        paths.append(out / "profile.png")
-        fig.savefig(paths[-1], dpi=90)
+            ax.set(xlabel=f"{prof.name} [{unit}]", ylabel="rise of -2 log L [-]")
+        paths.append(save_figure(fig, out / "profile.png"))
     return paths

@@ -229,13 +229,18 @@ def write_report(
         )
         sec["Correlations"] = img(cpath, "correlation matrix")
 
-        traces_png = folder / ("ppc.png" if (folder / "ppc.png").is_file() else "traces.png")
+        # The measured traces against the fitted ones always; the posterior predictive
+        # check beside them once there is a posterior.
         sec["Traces and posterior predictive check"] = (
-            ""
-            if traces_png.name == "ppc.png"
-            else "<p>No posterior predictive check yet "
-            "(run idtool sample); measured against fitted traces:</p>"
-        ) + img(traces_png, "measured and fitted traces")
+            "<p>Measured block means (grey) against the fitted traces (red), with the 95% "
+            "band of the load cell's noise around the fit.</p>"
+            + img(folder / "traces.png", "measured and fitted traces")
+            + (
+                img(folder / "ppc.png", "posterior predictive check")
+                if (folder / "ppc.png").is_file()
+                else "<p>No posterior predictive check yet (run idtool sample).</p>"
+            )
+        )
         sec["Residuals"] = img(folder / "residuals.png", "residuals and autocorrelation")
 
         corner_src = (
@@ -243,14 +248,16 @@ def write_report(
             if post is not None
             else draws.values
         )
-        kpath = corner_figure(corner_src, names, figs / "corner.png")
+        units = {n: doc["parameters"][n]["unit"] for n in names}
+        kpath = corner_figure(corner_src, names, units, figs / "corner.png")
         sec["Posterior: corner plot"] = f"<p>Draws: {html.escape(draws.note)}</p>" + img(
             kpath, "corner plot"
         )
         if post is not None:
             sampled = [str(v) for v in post.data_vars]
             chains = {n: np.asarray(post[n].values) for n in sampled}
-            wpath = walker_figure(chains, sampled, figs / "walkers.png")
+            units |= {n: str(post[n].attrs.get("units", "")) for n in sampled}
+            wpath = walker_figure(chains, sampled, units, figs / "walkers.png")
             diag = meta["diagnostics"]
             sec["Sampling: walkers and convergence"] = kv_table(diag) + img(wpath, "walkers")
             md += ["", f"Sampling converged: {diag.get('converged')}"]

@@ -159,11 +159,11 @@ def write_posterior_outputs(
 def plot_levels_check(check: LevelsCheck, free, model, path: Path) -> Path:
     """``ppc.png`` of a levels-model posterior: each trace's own friction ratio and OFF
     level (relative to the median) with their error bars, over the 95% predictive band."""
-    from idtool._plotting import subplots
+    from idtool._plotting import MAX_WIDTH_IN, save_figure, subplots
 
     m = model.data.n_traces
     y, (lo, hi) = check.y, check.band
-    fig, (a1, a2) = subplots(1, 2, figsize=(13, 4.2))
+    fig, (a1, a2) = subplots(1, 2, figsize=(MAX_WIDTH_IN, 5.0))
     x_off = np.arange(m)
     sd_off = np.sqrt(np.diag(free.cov_y)[:m])
     ref = np.median(y[:m])
@@ -171,7 +171,8 @@ def plot_levels_check(check: LevelsCheck, free, model, path: Path) -> Path:
         x_off, 100 * (lo[:m] - ref), 100 * (hi[:m] - ref), alpha=0.3, label="95% predictive"
     )
     a1.errorbar(x_off, 100 * (y[:m] - ref), 196 * sd_off, fmt="o", ms=3, label="trace (own level)")
-    a1.set(xlabel="trace", ylabel="log OFF level - median [%]", title="OFF levels")
+    a1.set_xticks(x_off, model.data.trace_ids, rotation=90, fontsize=9)
+    a1.set(ylabel="log OFF level - median [%]", title="OFF levels")
     idx = np.flatnonzero(free.measured)
     fr = np.exp(y[m:])
     a2.fill_between(
@@ -186,13 +187,12 @@ def plot_levels_check(check: LevelsCheck, free, model, path: Path) -> Path:
         label="trace (own FR)",
     )
     a2.set_xticks(
-        np.arange(idx.size), [model.data.trace_ids[i] for i in idx], rotation=90, fontsize=6
+        np.arange(idx.size), [model.data.trace_ids[i] for i in idx], rotation=90, fontsize=9
     )
     a2.set(
-        ylabel="friction ratio", title=f"FR per trace ({100 * check.inside_fraction:.0f}% inside)"
+        ylabel="friction ratio [-]",
+        title=f"FR per trace ({100 * check.inside_fraction:.0f}% inside)",
     )
     for a in (a1, a2):
-        a.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    return Path(path)
+        a.legend(fontsize=9)
+    return save_figure(fig, path)
