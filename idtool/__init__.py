@@ -34,6 +34,7 @@ _LAZY = {
     "load_dataset": "idtool._data._dataset",
     "example_dataset_path": "idtool._data._example",
     "example_params_path": "idtool._data._example",
+    "import_daq": "idtool._data._import",
     "write_dataset": "idtool._data._write",
     "IdtoolError": "idtool._errors",
     "Estimate": "idtool._fit._fit",
@@ -141,6 +142,7 @@ __all__ = [
     "example_dataset_path",
     "example_params_path",
     "fit",
+    "import_daq",
     "load_bench_params",
     "load_dataset",
     "load_fit",
@@ -174,6 +176,7 @@ def __dir__() -> list[str]:
 if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerly
     from idtool._data._dataset import Dataset, Rig, Trace, load_dataset
     from idtool._data._example import example_dataset_path, example_params_path
+    from idtool._data._import import import_daq
     from idtool._data._write import write_dataset
     from idtool._errors import IdtoolError
     from idtool._fit._fit import Estimate

@@ -31,6 +31,7 @@ _COMMANDS = (
     "_curve",
     "_seed_study",
     "_validate",
+    "_import",
     "_simulate_bench",
     "_fit",
     "_sample",

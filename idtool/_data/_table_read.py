@@ -18,7 +18,14 @@ import pyarrow.parquet as pq
 from idtool._data._schema import trace_columns
 from idtool._errors import Problem
 
-__all__ = ["RawColumn", "RawTable", "read_csv_table", "read_parquet_table", "read_table"]
+__all__ = [
+    "RawColumn",
+    "RawTable",
+    "parquet_column",
+    "read_csv_table",
+    "read_parquet_table",
+    "read_table",
+]
 
 TABLE_SUFFIXES = (".csv", ".parquet")
 MAX_LISTED = 5  # located problems listed per kind before they are counted
@@ -148,7 +155,7 @@ def read_csv_table(data: bytes, file: str) -> tuple[RawTable | None, list[Proble
     return RawTable(tuple(header), columns, len(rows)), problems
 
 
-def _parquet_column(column: pa.ChunkedArray) -> RawColumn | str:
+def parquet_column(column: pa.ChunkedArray) -> RawColumn | str:
     """The column's data, or the name of its unsupported type."""
     kind = column.type
     if pa.types.is_dictionary(kind):
@@ -192,7 +199,7 @@ def read_parquet_table(data: bytes, file: str) -> tuple[RawTable | None, list[Pr
             unusable.add(name)  # ignored, with a warning from the column check
             continue
         try:
-            raw = _parquet_column(table.column(j))
+            raw = parquet_column(table.column(j))
         except Exception as err:  # same reason: a corrupt page can fail only when decoded
             message = f"unreadable column ({err}); export the trace again"
             problems.append(Problem(message, file=file, row=0, column=name))
