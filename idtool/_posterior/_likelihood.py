@@ -43,6 +43,7 @@ __all__ = [
     "log_posterior_batch",
     "physical_values",
     "sampled_params",
+    "trace_logliks_batch",
 ]
 
 NUISANCE_PRIOR_SD = 100.0  # internal units (trace groups' scales): effectively flat
@@ -189,6 +190,16 @@ def marginal_loglik_batch(e: Array, v: dict, target: Target) -> tuple[Array, Arr
     """Log-likelihood of residuals ``e`` (walkers, blocks; model - data) with the
     nuisances integrated out (module docstring), (walkers,); and the nuisance shift at
     its conditional mode, (walkers, traces, groups). ``v`` maps names to (walkers,) arrays.
+    The sum over traces of :func:`trace_logliks_batch`."""
+    ll, shift = trace_logliks_batch(e, v, target)
+    return jnp.sum(ll, axis=1), shift
+
+
+def trace_logliks_batch(e: Array, v: dict, target: Target) -> tuple[Array, Array]:
+    """Each trace's log-likelihood (walkers, traces), the nuisances integrated out, and
+    the nuisance shift (walkers, traces, groups). Given the shared parameters the traces
+    are independent (the nuisances and the AR(1) noise are per trace), so these terms
+    are the exact factorisation of the likelihood: what ``az.loo`` needs per trace.
 
     With ``w = L e`` the whitened residuals and ``J_w = L J``: ``h = J_w^T w = J^T (L^T w)``
     and ``J_w^T J_w`` comes precomputed (:func:`_gram`), so a call costs two passes over
@@ -197,13 +208,17 @@ def marginal_loglik_batch(e: Array, v: dict, target: Target) -> tuple[Array, Arr
     t = target
     noise = t.model.noise
     n_traces = t.model.data.n_traces
+    block_trace = jnp.asarray(t.model.data.block_trace)
+
+    def per_trace(x: Array) -> Array:  # (blocks, walkers) -> (walkers, traces)
+        return jax.ops.segment_sum(x, block_trace, n_traces).T
+
     sigma = v["sigma_n"]
     phi = noise.phi(v)
     w = whiten(e.T, t.first, phi)  # (blocks, walkers)
     head = jnp.sqrt(1.0 - phi**2)
     nxt = jnp.where(t.continues[:, None], jnp.roll(w, -1, axis=0), 0.0)
     lt_w = jnp.where(t.first[:, None], head * w, w) - phi * nxt
-    block_trace = jnp.asarray(t.model.data.block_trace)
     h = jax.ops.segment_sum(t.jac_e[:, :, None] * lt_w[:, None, :], block_trace, n_traces)
     h = jnp.moveaxis(h, -1, 0)  # (walkers, traces, groups)
 
@@ -218,22 +233,23 @@ def marginal_loglik_batch(e: Array, v: dict, target: Target) -> tuple[Array, Arr
     chol = jnp.linalg.cholesky(a)
     y = solve_triangular(chol, (-h * scale[:, None, None])[..., None], lower=True)
     shift = solve_triangular(jnp.swapaxes(chol, -1, -2), y, lower=False)[..., 0]
-    log_det = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol, axis1=-2, axis2=-1)), axis=(1, 2))
-    n = e.shape[1]
-    p = shift.shape[1] * shift.shape[2]
+    log_det = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)
+    n = per_trace(jnp.ones_like(w))  # blocks per trace, (walkers, traces)
+    p = shift.shape[2]
     if not noise.gaussian:  # Laplace: the innovations' own density at the shifted mode
         jw = whiten(t.jac_e[:, :, None], t.first, phi)  # (blocks, 4, walkers)
         moved = jnp.moveaxis(shift, 0, -1)[block_trace]  # (blocks, 4, walkers)
         w_fit = w + jnp.sum(jw * moved, axis=1)
         u = w_fit / sigma
-        ll = jnp.sum(noise.innovation_logpdf(u, v), axis=0) - n * jnp.log(sigma)
-        ll = ll - 0.5 * prior_prec * jnp.sum(shift**2, axis=(1, 2))
+        ll = per_trace(noise.innovation_logpdf(u, v)) - n * jnp.log(sigma)[:, None]
+        ll = ll - 0.5 * prior_prec * jnp.sum(shift**2, axis=2)
     else:
         # min over the shift of |w + J_w s|^2 / sigma^2 + s^T s / sd^2, in closed form
-        ll = -0.5 * n * jnp.log(2.0 * jnp.pi * sigma**2) - 0.5 * jnp.sum(w**2, axis=0) / sigma**2
-        ll = ll + 0.5 * jnp.sum(y**2, axis=(1, 2, 3))
+        ll = -0.5 * n * jnp.log(2.0 * jnp.pi * sigma**2)[:, None]
+        ll = ll - 0.5 * per_trace(w**2) / (sigma**2)[:, None]
+        ll = ll + 0.5 * jnp.sum(y**2, axis=(2, 3))
     ll = ll - 0.5 * log_det - p * math.log(NUISANCE_PRIOR_SD)
-    return ll + 0.5 * n_traces * jnp.log1p(-(phi**2)), shift
+    return ll + 0.5 * jnp.log1p(-(phi**2))[:, None], shift
 
 
 def marginal_loglik(e: Array, v: dict, target: Target) -> tuple[Array, Array]:

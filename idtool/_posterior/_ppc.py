@@ -29,7 +29,7 @@ from idtool._posterior._likelihood import (
 )
 from idtool._posterior._sample import FitLike, Posterior
 
-__all__ = ["PredictiveCheck", "plot_predictive", "posterior_predictive"]
+__all__ = ["PredictiveCheck", "plot_predictive", "posterior_predictive", "replicate_blocks"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,20 +75,16 @@ def _lag1(e: np.ndarray, first: np.ndarray) -> np.ndarray:
     return prod.sum(axis=1) / np.sum(e**2, axis=1)
 
 
-def posterior_predictive(
-    post: Posterior, fit: FitLike, n_draws: int = 200, seed: int = 0, target: Target | None = None
-) -> PredictiveCheck:
-    """Replicate the measured traces from ``n_draws`` kept draws of ``post``."""
-    if target is None:
-        target = build_target(fit.model, post.z_lin, post.noise, post.priors)
-    kept = post.chain[post.diagnostics.burn :].reshape(-1, post.chain.shape[-1])
-    idx = np.unique(np.linspace(0, kept.shape[0] - 1, min(n_draws, kept.shape[0])).astype(int))
-    theta = kept[idx]
+def replicate_blocks(theta: np.ndarray, target: Target, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Replicated block means [N] (draws, blocks) for internal draws ``theta`` (draws,
+    ndim): the model at each draw, its nuisances at their conditional mode, plus AR(1)
+    noise with the draw's innovations (seeded); and the noise-free model means."""
     means = np.asarray(_means(jnp.asarray(theta), target))
-    vals = post.values[post.diagnostics.burn :].reshape(-1, post.values.shape[-1])[idx]
-    by_name = dict(zip(post.names, vals.T, strict=True))
+    by_name = {
+        p.name: np.asarray(p.value(jnp.asarray(theta[:, i]))) for i, p in enumerate(target.params)
+    }
     sigma = by_name["sigma_n"][:, None]
-    phi = by_name.get("phi", np.zeros(idx.size))
+    phi = by_name.get("phi", np.zeros(theta.shape[0]))
     rng = np.random.default_rng(seed)
     n_blocks = means.shape[1]
     eps = target.model.noise.draw_innovations(rng, by_name, n_blocks) * sigma
@@ -97,7 +93,20 @@ def posterior_predictive(
     head = 1.0 / np.sqrt(1.0 - phi**2)
     for i in range(n_blocks):
         noise[:, i] = eps[:, i] * head if first[i] else phi * noise[:, i - 1] + eps[:, i]
-    replicated = means + noise
+    return means + noise, means
+
+
+def posterior_predictive(
+    post: Posterior, fit: FitLike, n_draws: int = 200, seed: int = 0, target: Target | None = None
+) -> PredictiveCheck:
+    """Replicate the measured traces from ``n_draws`` kept draws of ``post``."""
+    if target is None:
+        target = build_target(fit.model, post.z_lin, post.noise, post.priors)
+    kept = post.chain[post.diagnostics.burn :].reshape(-1, post.chain.shape[-1])
+    idx = np.unique(np.linspace(0, kept.shape[0] - 1, min(n_draws, kept.shape[0])).astype(int))
+    replicated, means = replicate_blocks(kept[idx], target, seed)
+    noise = replicated - means
+    first = np.asarray(target.first)
     measured = np.asarray(target.force_n)
     lo, med, hi = np.percentile(replicated, [2.5, 50.0, 97.5], axis=0)
     mlo, mhi = np.percentile(means, [2.5, 97.5], axis=0)

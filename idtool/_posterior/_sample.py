@@ -32,7 +32,7 @@ import numpy as np
 
 from idtool._errors import IdtoolError
 from idtool._fit._discrepancy import Conditioning
-from idtool._fit._variability import SD_PARAMS
+from idtool._fit._variability import SD_PARAMS, FreeLevels
 from idtool._model._benchmodel import BenchModel
 from idtool._model._noise import NOISE_MODELS
 from idtool._model._params import Param
@@ -144,6 +144,7 @@ class Posterior:
     warnings: tuple[str, ...] = ()
     model: BenchModel | None = None  # the model sampled (for predictions)
     conditioning: Conditioning | None = None  # the data the discrepancy is conditioned on
+    free_levels: FreeLevels | None = None  # the levels model's data (its noise is LEVELS)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -178,10 +179,16 @@ class Posterior:
         return amplitude_table(draws, data, reduction_percent, load_n, speed_m_s)
 
     def to_arviz(self):
-        """The chain as ArviZ ``InferenceData`` (the content of ``posterior.nc``)."""
+        """The chain as ArviZ ``InferenceData``: the content of ``posterior.nc``, with
+        the groups ``az.loo``, ``az.compare`` and ``az.plot_ppc`` need when the
+        posterior carries its model (README, "posterior.nc in ArviZ")."""
+        from idtool._posterior._groups import model_check_groups
         from idtool._posterior._store import inference_data
 
-        return inference_data(self)
+        if self.model is None:
+            return inference_data(self)
+        groups, steps = model_check_groups(self)
+        return inference_data(self, None, groups, steps)
 
     def summary(self) -> dict[str, dict[str, Any]]:
         out = {}
@@ -400,6 +407,7 @@ def sample_posterior(
         warnings=warnings,
         model=fit.model,
         conditioning=fit.conditioning,
+        free_levels=fit.levels[0] if noise == LEVELS else None,
     )
 
 

@@ -13,8 +13,14 @@ import numpy as np
 from idtool._atomic import write_text_atomic
 from idtool._fit._fit import Estimate
 from idtool._model._noise import DEFAULT_NOISE
-from idtool._posterior._levels import LevelsCheck, build_levels_target, levels_predictive
-from idtool._posterior._likelihood import build_target, conditioning_shrinkage
+from idtool._posterior._groups import model_check_groups
+from idtool._posterior._levels import (
+    LevelsCheck,
+    LevelsTarget,
+    build_levels_target,
+    levels_predictive,
+)
+from idtool._posterior._likelihood import Target, build_target, conditioning_shrinkage
 from idtool._posterior._ppc import PredictiveCheck, plot_predictive, posterior_predictive
 from idtool._posterior._sample import LEVELS, FitLike, Posterior
 from idtool._posterior._store import write_posterior
@@ -113,9 +119,10 @@ def write_posterior_outputs(
     model = fit.model
     shrink = conditioning_shrinkage(fit.cov_z, model.n_shared)
     check: PredictiveCheck | LevelsCheck
+    target: Target | LevelsTarget
     if post.noise == LEVELS:
-        levels = build_levels_target(model, fit.levels[0], post.priors)
-        check = levels_predictive(post.chain, post.diagnostics.burn, levels, seed=post.seed)
+        target = build_levels_target(model, fit.levels[0], post.priors)
+        check = levels_predictive(post.chain, post.diagnostics.burn, target, seed=post.seed)
         nuisances: dict[str, Any] = {
             "treatment": "levels model: the traces' own levels with their covariance "
             "(nuisances, slopes and noise integrated in the fit's stage 1)"
@@ -146,7 +153,9 @@ def write_posterior_outputs(
         "versions": prov["versions"],
         "created_utc": prov["created_utc"],
     }
-    write_posterior(post, folder / "posterior.nc", extra={"fit_folder": str(folder)})
+    groups, steps = model_check_groups(post, target)
+    extra = {"fit_folder": str(folder)}
+    write_posterior(post, folder / "posterior.nc", extra, groups, steps)
     write_text_atomic(folder / "sample.json", json.dumps(doc, indent=1) + "\n")
     write_text_atomic(folder / "report_sample.txt", report + "\n")
     if isinstance(check, LevelsCheck):
