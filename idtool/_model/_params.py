@@ -81,6 +81,20 @@ class Param:
             return self.lo + (self.hi - self.lo) * 0.5 * (1.0 + jnp.tanh(z))
         return self.centre + self.scale * z
 
+    def transform(self) -> dict[str, str | float]:
+        """How :meth:`value` maps the internal ``z`` to physical units, as data and as a
+        formula (for files read without idtool: ``chain.h5`` records it)."""
+        out: dict[str, str | float] = {"name": self.name, "unit": self.unit, "kind": self.kind}
+        if self.kind == "log":
+            return out | {
+                "lo": self.lo,
+                "hi": self.hi,
+                "value": "exp(ln(lo) + (ln(hi) - ln(lo)) / (1 + exp(-z)))",
+            }
+        if self.kind == "tanh":
+            return out | {"lo": self.lo, "hi": self.hi, "value": "lo + (hi - lo) (1 + tanh(z)) / 2"}
+        return out | {"centre": self.centre, "scale": self.scale, "value": "centre + scale z"}
+
     def log_jacobian(self, z):
         """``log |d value / d z|`` (JAX), stable for large ``|z|``."""
         if self.kind == "log":

@@ -4,8 +4,11 @@ The layout is emcee's ``HDFBackend`` (group ``mcmc``: ``chain``, ``log_prob``,
 ``accepted``, the random state and the iteration count as attributes), so
 ``emcee.backends.HDFBackend("chain.h5", read_only=True)`` reads it; the file's own
 attribute ``idtool_settings`` (JSON) records what was sampled, to refuse resuming a
-chain under other settings, and its dataset ``idtool_linearisation`` the parameter
-vector at which the nuisances were linearised (:mod:`idtool._posterior._start`), so a resumed chain
+chain under other settings, and, under ``transforms``, how each column of the chain
+(internal scale ``z``) maps to physical units: a formula in ``z`` and the parameter's
+``lo``/``hi`` (or ``centre``/``scale``), with its unit (:meth:`idtool.Param.transform`);
+and its dataset ``idtool_linearisation`` the parameter vector at which the nuisances
+were linearised (:mod:`idtool._posterior._start`), so a resumed chain
 samples exactly the same target.
 
 The sampler runs in memory; every run segment is appended to a copy of ``chain.h5``

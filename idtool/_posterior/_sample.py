@@ -214,6 +214,8 @@ def _fingerprint(fit: FitLike) -> str:
 def _settings(fit: FitLike, params, priors, noise, walkers, seed) -> dict:
     return {
         "names": [p.name for p in params],
+        # the chain is on the internal scale: how each column maps to physical units
+        "transforms": [p.transform() for p in params],
         "noise": noise,
         "priors": {n: p.to_dict() for n, p in priors.items()},
         "walkers": walkers,
