@@ -81,7 +81,10 @@ _LAZY = {
     "Prediction": "idtool._predict._predict",
     "Amplitudes": "idtool._predict._tables",
     "Predictions": "idtool._predict._tables",
+    "Validation": "idtool._predict._validation",
     "write_report": "idtool._report._html",
+    "Comparison": "idtool._report._compare",
+    "compare_fits": "idtool._report._compare",
     "BenchParams": "idtool._simulate._params",
     "load_bench_params": "idtool._simulate._params",
     "BenchTruth": "idtool._simulate._simulate",
@@ -109,6 +112,7 @@ __all__ = [
     "BenchModel",
     "BenchParams",
     "BenchTruth",
+    "Comparison",
     "ConstantCoupling",
     "ConstantOffset",
     "Coulomb",
@@ -134,8 +138,10 @@ __all__ = [
     "Trace",
     "Transducer",
     "TransducerSteadyState",
+    "Validation",
     "__version__",
     "bench_model",
+    "compare_fits",
     "coulomb_friction_ratio",
     "cycle_average_curve",
     "dahl_small_lambda_friction_ratio",
@@ -208,6 +214,8 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
     from idtool._posterior._sample import Posterior
     from idtool._predict._predict import AmplitudeFor, Prediction
     from idtool._predict._tables import Amplitudes, Predictions
+    from idtool._predict._validation import Validation
+    from idtool._report._compare import Comparison, compare_fits
     from idtool._report._html import write_report
     from idtool._simulate._params import BenchParams, load_bench_params
     from idtool._simulate._simulate import BenchTruth, simulate_bench, write_simulation

@@ -10,6 +10,7 @@ Everything a notebook needs is here, with no private module in sight.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import time
@@ -36,6 +37,7 @@ from idtool._predict._predict import (
     draws_from_stored,
 )
 from idtool._predict._tables import Amplitudes, Predictions, amplitude_table, predict_table
+from idtool._predict._validation import Validation, select_traces, validate
 
 __all__ = ["Fit", "fit", "load_fit"]
 
@@ -252,6 +254,49 @@ class Fit:
         draws = self.draws(max_draws, seed)
         return amplitude_table(draws, self.model.data, reduction_percent, load_n, speed_m_s)
 
+    def validate(
+        self,
+        dataset: Dataset | str | os.PathLike | None = None,
+        traces: str | Sequence[str] | None = None,
+        *,
+        max_draws: int = 2000,
+        seed: int = 0,
+    ) -> Validation:
+        """How well the fit predicts traces it did not see (:mod:`idtool._predict.
+        _validation`): per trace, the force fit % and RMSE [N] with only its nuisances
+        fitted, and its own friction ratio against the 95% band of a new pull; their
+        coverage.
+
+        Args:
+            dataset: the traces to predict (default: the fit's own dataset).
+            traces: shell patterns selecting them (default: the traces of the fit's own
+                dataset that the fit did not use; all of another dataset's).
+        """
+        own = self.dataset
+        if dataset is None:
+            if own.path is None:
+                raise IdtoolError("the fit's dataset lives in memory: give a dataset")
+            dataset = load_dataset(own.path)
+        elif not isinstance(dataset, Dataset):
+            dataset = load_dataset(Path(dataset))
+        fitted = {t.id for t in own.traces} if dataset.sha256 == own.sha256 else set()
+        if traces is not None:
+            held = select_traces(dataset, traces)
+        elif fitted == {t.id for t in dataset.traces}:
+            raise IdtoolError(
+                f"the fit used every trace of {dataset.name}: nothing is held out; give "
+                "another session's dataset, or fit some traces with --traces"
+            )
+        else:
+            held = select_traces(dataset, [f"!{i}" for i in sorted(fitted)] or ["*"])
+        reused = sorted(fitted & {t.id for t in held.traces})
+        draws = self.draws(max_draws, seed)
+        out = validate(self.model, self.z, self.phi, draws, held)
+        if reused:
+            note = f"not held out: {', '.join(reused)} were fitted"
+            out = dataclasses.replace(out, warnings=(*out.warnings, note))
+        return out
+
     # ------------------------------------------------------------------ files
     def to_json(self, command: Sequence[str] | None = None) -> dict:
         """The ``fit.json`` document (schema in the README)."""
@@ -312,8 +357,10 @@ def fit(
     actuator: str = "auto",
     offset: str = "auto",
     progress: Callable[[str], None] | None = None,
+    traces: str | Sequence[str] | None = None,
 ) -> Fit:
-    """Identify Kt, mu and the coupling from every trace of ``dataset`` at once.
+    """Identify Kt, mu and the coupling from every trace of ``dataset`` (or those
+    ``traces`` selects) at once.
 
     Args:
         dataset: a :class:`~idtool.Dataset` or the path of a v1 dataset folder.
@@ -342,12 +389,17 @@ def fit(
         progress: called with a line of text as each stage of the fit starts (each
             candidate model, the interval checks, the levels model); ``print`` shows
             them.
+        traces: fit only the traces whose ids match these shell patterns (a list, or
+            comma-separated; ``!`` excludes: ``"*,!*_T2.5"``), to hold the others out
+            for :meth:`Fit.validate`; ``fit.json`` lists the fitted traces.
     """
     if starts < 1:
         raise IdtoolError(f"starts = {starts}: give at least 1")
     started = time.perf_counter()
     if not isinstance(dataset, Dataset):
         dataset = load_dataset(Path(dataset))
+    if traces is not None:
+        dataset = select_traces(dataset, traces)
     run = fit_dataset(
         dataset,
         law=law,

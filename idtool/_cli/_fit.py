@@ -34,6 +34,7 @@ def _run(args: argparse.Namespace) -> int:
         profile=args.profile,
         mains_hz=args.mains_hz,
         progress=None if args.quiet else _progress,
+        traces=args.traces,
     )
     fit.save(args.out, force=args.force, command=args.argv)
     if args.json:  # fit.json as written, for scripts (the report is in report.txt)
@@ -112,6 +113,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="mains frequency [Hz] (50 or 60); default: rig.mains_frequency_hz of the "
         "dataset, else the hum found in the traces, else 50",
+    )
+    p.add_argument(
+        "--traces",
+        metavar="PATTERN",
+        help="fit only the traces whose ids match these shell patterns, comma-separated; "
+        "'!' excludes (e.g. '*,!*_T2.5' holds the 2.5 s pulls out for 'idtool "
+        "validate-fit'); fit.json lists the fitted traces",
     )
     p.add_argument("--force", action="store_true", help="replace an existing --out")
     p.add_argument("--json", action="store_true", help="print fit.json instead of the text report")

@@ -34,9 +34,11 @@ _COMMANDS = (
     "_import",
     "_simulate_bench",
     "_fit",
+    "_validate_fit",
     "_sample",
     "_predict",
     "_report",
+    "_compare",
     "_demo",
 )
 

@@ -133,6 +133,10 @@ def load_stored_fit(folder: str | Path) -> StoredFit:
             f"{ds_info['path']}: the dataset changed since the fit (sha256 "
             f"{dataset.sha256[:12]}... instead of {ds_info['sha256'][:12]}...); fit it again"
         )
+    fitted = ds_info.get("traces")  # a fit of some of the dataset's traces (--traces)
+    if fitted is not None and len(fitted) != len(dataset.traces):
+        by_id = {t.id: t for t in dataset.traces}
+        dataset = dataclasses.replace(dataset, traces=tuple(by_id[i] for i in fitted))
     data = prepare_fit_data(
         dataset, mains_hz=mains_hz, periods_per_block=periods, mains_source=source
     )

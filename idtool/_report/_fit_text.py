@@ -127,7 +127,13 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
         "notes": r.notes,
         "lm_steps": r.lm_steps,
         "jacobian_evaluations": r.jacobian_evaluations,
-        "dataset": {"name": d.name, "sha256": d.sha256, "path": dataset_path},
+        # the fitted traces: all of the dataset's, or those --traces selected
+        "dataset": {
+            "name": d.name,
+            "sha256": d.sha256,
+            "path": dataset_path,
+            "traces": list(d.trace_ids),
+        },
         "idtool_version": __version__,
         "seed": run.seed,
         "command": prov["command"],
