@@ -44,8 +44,10 @@ __all__ = [
     "draws_from_posterior",
     "draws_from_stored",
     "extrapolation_notes",
+    "friction_ratio_draws",
     "predict_friction_ratio",
     "prediction_draws",
+    "predictions_from_draws",
 ]
 
 _BISECTIONS = 40  # amplitude resolution 2^-40
@@ -297,22 +299,33 @@ def _band(x: np.ndarray, axis: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndar
     return med, lo, hi
 
 
+def friction_ratio_draws(
+    draws: Draws, load_n, amplitude, speed_m_s
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per draw, FR at the operating points ``(load_n[i] [N], amplitude[i] (fraction of
+    the maximum), speed_m_s[i] [m/s])`` (equal-length sequences): the mean FR there
+    (the curve with its discrepancy) and a next pull's (scatter added), each (draws,
+    points); :func:`with_variability`. Every forward prediction goes through here."""
+    load, alpha, speed = (np.asarray(x, float).reshape(-1) for x in (load_n, amplitude, speed_m_s))
+    v = {k: jnp.asarray(x) for k, x in draws.values.items()}
+    fr = np.asarray(
+        _fr_draws(draws.model, v, jnp.asarray(load), jnp.asarray(alpha), jnp.asarray(speed))
+    )
+    return with_variability(fr, draws, np.asarray(operating_coordinates(load, alpha, speed)))
+
+
 def predict_friction_ratio(draws: Draws, loads_n, amplitudes, speeds_m_s) -> list[Prediction]:
     """FR over the grid ``loads x amplitudes x speeds`` (in that order)."""
     grid = np.array(
         [(n, a, s) for n in loads_n for a in amplitudes for s in speeds_m_s], float
     ).reshape(-1, 3)
-    v = {k: jnp.asarray(x) for k, x in draws.values.items()}
-    fr = np.asarray(
-        _fr_draws(
-            draws.model,
-            v,
-            jnp.asarray(grid[:, 0]),
-            jnp.asarray(grid[:, 1]),
-            jnp.asarray(grid[:, 2]),
-        )
-    )
-    mean, new = with_variability(fr, draws, np.asarray(operating_coordinates(*grid.T)))
+    mean, new = friction_ratio_draws(draws, grid[:, 0], grid[:, 1], grid[:, 2])
+    return predictions_from_draws(grid, mean, new)
+
+
+def predictions_from_draws(grid: np.ndarray, mean: np.ndarray, new: np.ndarray) -> list[Prediction]:
+    """One :class:`Prediction` per row (load [N], amplitude fraction, speed [m/s]) of
+    ``grid`` from :func:`friction_ratio_draws`' ``mean`` and ``new`` (draws, points)."""
     med, lo, hi = _band(mean)
     nmed, nlo, nhi = _band(new)
     return [
