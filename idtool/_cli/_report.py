@@ -23,7 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="write fits/NAME/report.html (self-contained, opens offline)",
         description="Uncertainty report of a fit (and its posterior, if sampled). First "
         "the answer: the friction ratio and reduction at each tested load and amplitude "
-        "with 95%% bands, and the amplitude needed for each target reduction; then "
+        "with 95% bands, and the amplitude needed for each target reduction; then "
         "banners for an unconverged chain, misfit or extrapolation; then the evidence "
         "(estimates, correlations, traces, residuals, corner plot, convergence, curves, "
         "model comparison, provenance) and a sign-off block. Also figures/*.png and "

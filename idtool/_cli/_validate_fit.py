@@ -40,9 +40,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Held-out validation: each trace the fit did not see is predicted "
         "with the fit's shared parameters (only the trace's own nuisances, load-cell "
         "offset, pull start and horn lags, are fitted to it). Per trace: the force fit "
-        "%% (100 (1 - |y - y_hat| / |y - mean y|), MATLAB's NRMSE fit) and RMSE [N], and "
-        "the trace's own friction ratio against the fit's 95%% band for a new pull; "
-        "their coverage (about 95%% if the bands are honest). Written to "
+        "% (100 (1 - |y - y_hat| / |y - mean y|), MATLAB's NRMSE fit) and RMSE [N], and "
+        "the trace's own friction ratio against the fit's 95% band for a new pull; "
+        "their coverage (about 95% if the bands are honest). Written to "
         f"fits/NAME/{VALIDATION_FILE} and shown by 'idtool report'.",
     )
     p.add_argument("fit", help="a fit folder made by 'idtool fit'")
