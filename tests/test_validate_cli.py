@@ -114,3 +114,20 @@ def test_console_script_reports_bad_data_without_traceback(tmp_path):
     )
     assert good.returncode == 0, good.stderr
     assert "valid: no errors" in good.stdout
+
+
+def test_the_compilation_cache_is_locked_between_processes(tmp_path):
+    """The CLI's on-disk compilation cache has a size limit, which is what makes JAX
+    lock its reads and writes (filelock): unlocked, a process read an entry another was
+    still writing and segfaulted deserialising it (two test workers, CI)."""
+    import filelock  # the lock JAX needs for it  # noqa: F401
+    from jax._src.lru_cache import LRUCache
+
+    from idtool._cli._main import CACHE_MAX_BYTES, compilation_cache_settings
+
+    settings = compilation_cache_settings(str(tmp_path))
+    assert settings["jax_compilation_cache_max_size"] == CACHE_MAX_BYTES > 0
+    cache = LRUCache(str(tmp_path), max_size=CACHE_MAX_BYTES)
+    assert cache.eviction_enabled
+    cache.put("k", b"v")
+    assert cache.get("k") == b"v" and (tmp_path / ".lockfile").exists()  # it locked

@@ -21,6 +21,8 @@ EXIT_BAD_INPUT = 2  # bad input or refused overwrite: nothing written
 EXIT_NOT_CONVERGED = 3  # sample: outputs written, but the chain did not converge
 EXIT_INTERRUPTED = 130
 
+CACHE_MAX_BYTES = 2 * 1024**3  # the compilation cache's disk use (the demo's: ~100 MB)
+
 EXIT_CODES = (
     f"exit status: 0 done; {EXIT_BAD_INPUT} bad input or an output that exists without "
     f"--force (nothing written); {EXIT_NOT_CONVERGED} 'sample' wrote its outputs but the "
@@ -69,6 +71,23 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def compilation_cache_settings(path: str) -> dict[str, object]:
+    """JAX's configuration for the on-disk compilation cache in folder ``path``."""
+    return {
+        "jax_compilation_cache_dir": path,
+        # Every program, however small: two dozen of 20-30 ms each were recompiled on
+        # every run below the default threshold (0.6 s of a warm fit).
+        "jax_persistent_cache_min_compile_time_secs": 0.0,
+        # XLA's own autotuning caches put the cache folder's path into the compile
+        # options, so the key of the same program changed with IDTOOL_CACHE_DIR.
+        "jax_persistent_cache_enable_xla_caches": "none",
+        # A size limit (least recently used entries go) is what makes JAX lock the
+        # cache's reads and writes (filelock): without it a second process can read an
+        # entry still being written and crash deserialising it.
+        "jax_compilation_cache_max_size": CACHE_MAX_BYTES,
+    }
+
+
 def _enable_compilation_cache() -> None:
     """Keep compiled XLA programs on disk so a repeated command skips compilation.
 
@@ -83,15 +102,7 @@ def _enable_compilation_cache() -> None:
     path = os.environ.get("IDTOOL_CACHE_DIR", os.path.expanduser("~/.cache/idtool/jax"))
     if not path:
         return
-    settings = {
-        "jax_compilation_cache_dir": path,
-        # Every program, however small: two dozen of 20-30 ms each were recompiled on
-        # every run below the default threshold (0.6 s of a warm fit).
-        "jax_persistent_cache_min_compile_time_secs": 0.0,
-        # XLA's own autotuning caches put the cache folder's path into the compile
-        # options, so the key of the same program changed with IDTOOL_CACHE_DIR.
-        "jax_persistent_cache_enable_xla_caches": "none",
-    }
+    settings = compilation_cache_settings(path)
     jax = sys.modules.get("jax")
     for name, value in settings.items():
         if jax is not None:
