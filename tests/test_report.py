@@ -70,7 +70,7 @@ def fitted(tmp_path_factory):
     data = idtool.write_dataset(dataset, root / "data")
     out = root / "fits" / "r"
     with _recording_figures():
-        assert main(["fit", str(data), "--out", str(out), "--profile"]) == 0
+        assert main(["fit", str(data), "--out", str(out)]) == 0
         assert main(["report", str(out)]) == 0
     return out
 
@@ -93,7 +93,7 @@ def test_figures_are_legible_at_print_size(fitted, sampled_report):
     unscaled at 100% zoom), so its text shows at the size it was drawn, all >= 9 pt;
     every axis label carries its unit in brackets."""
     names = {f["name"] for f in FIGURES}
-    expected = {"traces.png", "residuals.png", "profile.png", "ppc.png", "corner.png"}
+    expected = {"traces.png", "residuals.png", "ppc.png", "corner.png"}
     assert expected | {"walkers.png", "fr_vs_load.png", "amplitude_map.png"} <= names
     for f in FIGURES:
         assert f["dpi"] == 96 and f["width_in"] <= 11.0, f["name"]

@@ -28,6 +28,7 @@ def held_out(tmp_path_factory):
     data = idtool.write_dataset(_dataset(7), root / "data")
     out = root / "fit"
     argv = ["fit", str(data), "--out", str(out), "--traces", "*,!*_T2.5", "-q"]
+    argv += ["--actuator", "slope", "--offset", "constant"]  # one model: CI time
     assert main(argv) == 0
     return root, data, out
 
