@@ -38,6 +38,8 @@ _LAZY = {
     "write_dataset": "idtool._data._write",
     "IdtoolError": "idtool._errors",
     "Estimate": "idtool._fit._fit",
+    "read_parameter_table": "idtool._fit._parameter_table",
+    "ParameterSetting": "idtool._model._settings",
     "ACTUATORS": "idtool._model._actuator",
     "AbstractActuator": "idtool._model._actuator",
     "LagActuator": "idtool._model._actuator",
@@ -128,6 +130,7 @@ __all__ = [
     "LagActuator",
     "LuGre",
     "Param",
+    "ParameterSetting",
     "Posterior",
     "PowerLimitedCoupling",
     "Prediction",
@@ -154,6 +157,7 @@ __all__ = [
     "load_fit",
     "plot_seed_study",
     "prescribed_cycle_average",
+    "read_parameter_table",
     "seed_study",
     "simulate_bench",
     "simulate_transducer",
@@ -186,6 +190,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
     from idtool._data._write import write_dataset
     from idtool._errors import IdtoolError
     from idtool._fit._fit import Estimate
+    from idtool._fit._parameter_table import read_parameter_table
     from idtool._model._actuator import ACTUATORS, AbstractActuator, LagActuator, SlopeActuator
     from idtool._model._benchmodel import BenchModel, bench_model
     from idtool._model._contact import CycleAverage, cycle_average_curve, prescribed_cycle_average
@@ -202,6 +207,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
     from idtool._model._offset import OFFSETS, AbstractOffset, ConstantOffset, DriftingOffset
     from idtool._model._params import Param
     from idtool._model._seed_study import SEED_FIGURES, plot_seed_study, seed_study
+    from idtool._model._settings import ParameterSetting
     from idtool._model._transducer import (
         EnergyBalance,
         Transducer,

@@ -14,7 +14,7 @@ import dataclasses
 import json
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -24,10 +24,12 @@ from idtool._data._dataset import Dataset, load_dataset
 from idtool._data._write import write_dataset
 from idtool._errors import IdtoolError
 from idtool._fit._fit import Estimate, FitResult
+from idtool._fit._parameter_table import parse_fix, read_parameter_table
 from idtool._fit._run import FitRun, fit_dataset
 from idtool._fit._store import StoredFit, load_stored_fit, save_fit_state
 from idtool._model._benchmodel import BenchModel
 from idtool._model._noise import DEFAULT_NOISE
+from idtool._model._settings import ParameterSetting
 from idtool._posterior._sample import Posterior, sample_posterior
 from idtool._posterior._store import POSTERIOR_FILE, load_posterior
 from idtool._predict._predict import (
@@ -149,6 +151,7 @@ class Fit:
 
     def __repr__(self) -> str:
         phys = ", ".join(f"{n}={self.estimates[n].estimate:.4g}" for n in self.model.physical_names)
+        phys += "".join(f", {n}={v:.4g} (fixed)" for n, v in self.model.fixed.items())
         return (
             f"Fit({self.dataset.name!r}, {self.model.law.name}/{self.model.coupling.name}/"
             f"{self.model.noise.name}: {phys})"
@@ -358,6 +361,8 @@ def fit(
     offset: str = "auto",
     progress: Callable[[str], None] | None = None,
     traces: str | Sequence[str] | None = None,
+    fix: Mapping[str, float] | None = None,
+    parameters: str | os.PathLike | Sequence[ParameterSetting] | None = None,
 ) -> Fit:
     """Identify Kt, mu and the coupling from every trace of ``dataset`` (or those
     ``traces`` selects) at once.
@@ -392,6 +397,12 @@ def fit(
         traces: fit only the traces whose ids match these shell patterns (a list, or
             comma-separated; ``!`` excludes: ``"*,!*_T2.5"``), to hold the others out
             for :meth:`Fit.validate`; ``fit.json`` lists the fitted traces.
+        fix: shared parameters held at a value, by name, physical units
+            (``{"mu": 0.3}``): not estimated, not sampled, not counted in AIC/BIC.
+        parameters: a PEtab-like parameter table (path; :func:`idtool.read_parameter_table`)
+            or its settings (:class:`idtool.ParameterSetting`): fixed values, bounds,
+            scales, starts and the sampler's priors. ``fit.json`` records them, so
+            :func:`load_fit` and :meth:`Fit.sample` use them too.
     """
     if starts < 1:
         raise IdtoolError(f"starts = {starts}: give at least 1")
@@ -400,6 +411,13 @@ def fit(
         dataset = load_dataset(Path(dataset))
     if traces is not None:
         dataset = select_traces(dataset, traces)
+    settings: tuple[ParameterSetting, ...] = ()
+    if isinstance(parameters, str | os.PathLike):
+        settings = read_parameter_table(parameters)
+    elif parameters is not None:
+        settings = tuple(parameters)
+    if fix:
+        settings += parse_fix(f"{name}={value}" for name, value in fix.items())
     run = fit_dataset(
         dataset,
         law=law,
@@ -414,6 +432,7 @@ def fit(
         actuator=actuator,
         offset=offset,
         progress=progress,
+        settings=settings,
     )
     out = Fit(dataset, run.chosen, run)
     out.seconds = time.perf_counter() - started

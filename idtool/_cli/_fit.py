@@ -35,6 +35,8 @@ def _run(args: argparse.Namespace) -> int:
         mains_hz=args.mains_hz,
         progress=None if args.quiet else _progress,
         traces=args.traces,
+        parameters=args.parameters,
+        fix=_fixed(args.fix),
     )
     fit.save(args.out, force=args.force, command=args.argv)
     if args.json:  # fit.json as written, for scripts (the report is in report.txt)
@@ -46,6 +48,14 @@ def _run(args: argparse.Namespace) -> int:
         f"{time.perf_counter() - started:.1f} s"
     )
     return 0
+
+
+def _fixed(items: list[str] | None) -> dict[str, float] | None:
+    """``--fix NAME=VALUE`` options as a mapping (an unreadable one: located error)."""
+    from idtool._fit._parameter_table import parse_fix
+
+    settings = parse_fix(items or [])
+    return {s.name: float(s.nominal) for s in settings if s.nominal is not None} or None
 
 
 def _progress(line: str) -> None:
@@ -120,6 +130,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="fit only the traces whose ids match these shell patterns, comma-separated; "
         "'!' excludes (e.g. '*,!*_T2.5' holds the 2.5 s pulls out for 'idtool "
         "validate-fit'); fit.json lists the fitted traces",
+    )
+    p.add_argument(
+        "--fix",
+        action="append",
+        metavar="NAME=VALUE",
+        help="hold a shared parameter at a value, SI units (e.g. --fix mu=0.3); repeatable; "
+        "not estimated, not sampled, not counted in AIC/BIC",
+    )
+    p.add_argument(
+        "--parameters",
+        metavar="FILE",
+        help="PEtab-like parameter table (TSV or CSV: parameterId, estimate, nominalValue, "
+        "lowerBound, upperBound, parameterScale, objectivePriorType, "
+        "objectivePriorParameters): fixed values, bounds, scales, starts and the sampler's "
+        "priors; 'idtool parameters' writes one to edit",
     )
     p.add_argument("--force", action="store_true", help="replace an existing --out")
     p.add_argument("--json", action="store_true", help="print fit.json instead of the text report")

@@ -35,6 +35,7 @@ _COMMANDS = (
     "_validate",
     "_import",
     "_simulate_bench",
+    "_parameters",
     "_fit",
     "_validate_fit",
     "_sample",

@@ -37,6 +37,7 @@ from idtool._model._benchmodel import BenchModel, bench_model
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._offset import DEFAULT_OFFSET
 from idtool._model._params import Param
+from idtool._model._settings import ParameterSetting
 
 if TYPE_CHECKING:
     from idtool._fit._variability import Variability
@@ -74,6 +75,7 @@ class Estimate:
     std_error: float
     ci95: tuple[float, float]
     at_bound: bool = False
+    fixed: bool = False  # fixed by the user (--fix, a parameter table): not estimated
 
 
 @dataclasses.dataclass(frozen=True)
@@ -208,7 +210,10 @@ def _start_point(model: BenchModel, u: np.ndarray) -> dict[str, float]:
         if p.start_box is not None and p.name != "coupling_gain":
             lo, hi = p.start_box
             start[p.name] = float(np.exp(np.log(lo) + u[j] * (np.log(hi) - np.log(lo))))
-    j = model.names.index("coupling_gain")
+    names = [p.name for p in specs]
+    if "coupling_gain" not in names or specs[names.index("coupling_gain")].start_box is None:
+        return start  # the gain fixed, or started where the user said
+    j = names.index("coupling_gain")
     loads, alphas = np.asarray(d.normal_load_n), np.asarray(d.amplitude_fraction)
     ref = np.lexsort((np.abs(loads - np.median(loads)), -alphas))[0]
     w = 2.0 * np.pi * float(d.vibration_frequency_hz)
@@ -250,13 +255,16 @@ def fit_model(
     actuator: str = DEFAULT_ACTUATOR,
     start_from: FitResult | None = None,
     offset: str = DEFAULT_OFFSET,
+    settings: tuple[ParameterSetting, ...] = (),
 ) -> FitResult:
     """Fit one law, coupling, actuator and load-cell offset model to prepared data; see
     the module docstring. ``start_from``: a fit of a model this one nests (the slope
     actuator for the lag one, the constant offset for the drifting one, the constant
     coupling for a saturating one): its optimum is the start, the new parameters where
-    this model reduces to that one (:attr:`Param.nested_at`), with no multi-start."""
-    model = bench_model(data, law, coupling, noise, actuator, offset)
+    this model reduces to that one (:attr:`Param.nested_at`), with no multi-start.
+    ``settings``: the user's fixed values, bounds, scales, starts and priors
+    (:mod:`idtool._model._settings`)."""
+    model = bench_model(data, law, coupling, noise, actuator, offset, settings)
     k = model.n_physical
     base = model.z0()
     everything = jnp.ones(base.size, bool)
@@ -291,7 +299,10 @@ def fit_model(
     # their real loss: held nuisances ranked a spurious low-Kt basin first on two-load
     # designs (nuisance misfit was ~60x the final loss there).
     points, ends = [], []
-    for u in quasi_random(n_starts, k, seed):
+    # every physical parameter fixed or started by the user: one start is the fit
+    varied = [p for p in model.shared_params[:k] if p.start_box is not None]
+    cube = quasi_random(n_starts, k, seed) if varied else np.zeros((1, k))
+    for u in cube:
         start = _start_point(model, u)
         z = base.copy()
         z[:k] = model.z0(**start)[:k]
@@ -407,6 +418,9 @@ def _summarise(
                 f"{spec.name}: its 95% interval spans more than a factor of 100 "
                 f"({lo:.3g} to {hi:.3g} {spec.unit}); the data cannot inform it"
             )
+    for name, value in model.fixed.items():  # the user's values, reported as such
+        unit = next(p.unit for p in model.declared_params if p.name == name)
+        estimates[name] = Estimate(name, unit, value, 0.0, (value, value), fixed=True)
     k = model.n_physical
     for a in range(k):
         for b in range(a + 1, k):

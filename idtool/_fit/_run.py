@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import jax.numpy as jnp
 import numpy as np
@@ -26,16 +26,28 @@ import numpy as np
 from idtool._data._blocks import FitData, prepare_fit_data
 from idtool._data._dataset import Dataset
 from idtool._data._mains import resolve_mains
+from idtool._errors import IdtoolError
 from idtool._fit._fit import FitResult, fit_model
 from idtool._fit._intervals import check_intervals, refit_with_fixed
 from idtool._fit._variability import with_variability
 from idtool._model._actuator import ACTUATORS
+from idtool._model._benchmodel import shared_params_of
 from idtool._model._coupling import COUPLINGS
 from idtool._model._laws import FRICTION_LAWS
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._offset import OFFSETS
+from idtool._model._params import Param
+from idtool._model._settings import ParameterSetting
 
-__all__ = ["FitRun", "LawWeight", "Profile", "coupling_weights", "fit_dataset", "profile_parameter"]
+__all__ = [
+    "FitRun",
+    "LawWeight",
+    "Profile",
+    "check_settings",
+    "coupling_weights",
+    "fit_dataset",
+    "profile_parameter",
+]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -136,6 +148,7 @@ def fit_dataset(
     actuator: str = "auto",
     offset: str = "auto",
     progress: Callable[[str], None] | None = None,
+    settings: Sequence[ParameterSetting] = (),
 ) -> FitRun:
     """Fit ``dataset``; ``law``, ``coupling``, ``noise``, ``actuator`` and ``offset`` by
     registered name (:data:`FRICTION_LAWS`, :data:`COUPLINGS`, :data:`NOISE_MODELS`,
@@ -148,7 +161,10 @@ def fit_dataset(
     (default): the chosen fit's intervals carry pull-to-pull scatter and model
     discrepancy (:mod:`idtool._fit._variability`); False gives the noise-only model.
     ``progress``: called with a line of text as each stage starts (each candidate model,
-    the interval checks, the levels model), for a command line's progress."""
+    the interval checks, the levels model), for a command line's progress.
+    ``settings``: fixed values, bounds, scales, starts and priors of shared parameters
+    (:mod:`idtool._model._settings`), applied to every candidate model that has the
+    parameter; a setting that names none of them is an error."""
     started = time.perf_counter()
 
     def say(what: str) -> None:
@@ -167,6 +183,7 @@ def fit_dataset(
         couplings = ("constant",)
     actuators = ACTUATORS.names() if actuator == "auto" else (ACTUATORS.get(actuator).name,)
     offsets = OFFSETS.names() if offset == "auto" else (OFFSETS.get(offset).name,)
+    settings = check_settings(tuple(settings), laws, couplings, actuators)
     candidates: dict[str, FitResult] = {}
     for lw in laws:
         for cp in couplings:
@@ -179,7 +196,7 @@ def fit_dataset(
                 key = _key(lw, cp, ac, offsets[0])
                 say(f"fitting {key}")
                 fit = fit_model(
-                    data, lw, cp, seed, n_starts, noise, ac, start_from=nested, offset=offsets[0]
+                    data, lw, cp, seed, n_starts, noise, ac, nested, offsets[0], settings
                 )
                 if nested is None and cp != couplings[0]:
                     # a saturating law also from the simplest law's optimum (its load
@@ -189,7 +206,9 @@ def fit_dataset(
                     simplest = candidates[_key(lw, couplings[0], ac, offsets[0])]
                     fit = _better(
                         fit,
-                        fit_model(data, lw, cp, seed, n_starts, noise, ac, simplest, offsets[0]),
+                        fit_model(
+                            data, lw, cp, seed, n_starts, noise, ac, simplest, offsets[0], settings
+                        ),
                     )
                 group[key] = fit
                 nested = nested or fit
@@ -198,7 +217,7 @@ def fit_dataset(
             for of in offsets[1:]:
                 say(f"fitting {_key(lw, cp, ac, of)}")
                 group[_key(lw, cp, ac, of)] = fit_model(
-                    data, lw, cp, seed, n_starts, noise, ac, start_from=base, offset=of
+                    data, lw, cp, seed, n_starts, noise, ac, base, of, settings
                 )
             candidates |= group
     ranked = sorted(candidates.items(), key=lambda kv: kv[1].bic)
@@ -242,6 +261,45 @@ def fit_dataset(
         for name in best.model.physical_names:
             profiles[name] = profile_parameter(best, name)
     return FitRun(data, best, candidates, reason, seed, profiles)
+
+
+def check_settings(
+    settings: tuple[ParameterSetting, ...],
+    laws: Sequence[str],
+    couplings: Sequence[str],
+    actuators: Sequence[str],
+) -> tuple[ParameterSetting, ...]:
+    """``settings`` if each names a shared parameter of some candidate model and fits
+    it (bounds, scale, value); else an :class:`IdtoolError` naming where it was given."""
+    declared: dict[str, Param] = {}
+    for lw in laws:
+        for cp in couplings:
+            for ac in actuators:
+                every = shared_params_of(
+                    FRICTION_LAWS.get(lw), COUPLINGS.get(cp), ACTUATORS.get(ac)
+                )
+                for p in every:
+                    declared.setdefault(p.name, p)
+    problems, seen = [], set()
+    for s in settings:
+        where = f"{s.source}: " if s.source else ""
+        if s.name in seen:
+            problems.append(f"{where}{s.name} is set twice")
+            continue
+        seen.add(s.name)
+        if s.name not in declared:
+            problems.append(
+                f"{where}no shared parameter {s.name!r} in the models fitted; they have "
+                + ", ".join(declared)
+            )
+            continue
+        try:
+            s.apply(declared[s.name]) if s.estimate else s.check_fixed(declared[s.name])
+        except ValueError as err:
+            problems.append(f"{where}{err}")
+    if problems:
+        raise IdtoolError("parameter settings:\n  " + "\n  ".join(problems))
+    return settings
 
 
 def profile_parameter(result: FitResult, name: str, n_points: int = 9) -> Profile:

@@ -20,6 +20,7 @@ from idtool._fit._discrepancy import Conditioning
 from idtool._fit._fit import Estimate, FitResult
 from idtool._fit._variability import FreeLevels, discrepancy_conditioning
 from idtool._model._benchmodel import BenchModel, bench_model
+from idtool._model._settings import ParameterSetting
 
 __all__ = ["STATE_FILE", "StoredFit", "load_stored_fit", "save_fit_state"]
 
@@ -87,6 +88,7 @@ class StoredFit:
                 float(e["std_error"]),
                 (float(e["ci95"][0]), float(e["ci95"][1])),
                 bool(e.get("at_bound", False)),
+                bool(e.get("fixed", False)),
             )
             for name, e in entries.items()
         }
@@ -152,6 +154,7 @@ def load_stored_fit(folder: str | Path) -> StoredFit:
         doc["noise"].get("name", "ar1"),
         doc.get("actuator", {}).get("name", "slope"),  # fits before the lag model: slope
         doc.get("offset", {}).get("name", "constant"),  # before the drift model: constant
+        tuple(ParameterSetting.from_dict(s) for s in doc.get("parameter_settings", [])),
     )
     if tuple(state["names"]) != model.names:
         raise IdtoolError(f"{state_path}: parameters do not match the model; fit again")

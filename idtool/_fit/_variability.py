@@ -160,7 +160,7 @@ def _at_level_s(model: BenchModel, z: np.ndarray, levels: np.ndarray) -> np.ndar
     end = np.asarray(d.on_end_s) + np.asarray(v["delay_off_s"])
     with np.errstate(invalid="ignore"):
         length = np.where(np.isfinite(start) & np.isfinite(end), end - start, -np.inf)
-    settle = np.asarray(model.actuator.from_values(v).settle_time_s(off - on))
+    settle = np.asarray(model.actuator_of(v).settle_time_s(off - on))
     return length - settle
 
 

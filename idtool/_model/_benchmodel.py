@@ -45,8 +45,9 @@ from idtool._model._laws import FRICTION_LAWS, MU, AbstractFrictionLaw
 from idtool._model._noise import DEFAULT_NOISE, NOISE_MODELS, AbstractNoise, whiten
 from idtool._model._offset import DEFAULT_OFFSET, OFFSETS, AbstractOffset
 from idtool._model._params import Param
+from idtool._model._settings import ParameterSetting, apply_settings, fixed_values
 
-__all__ = ["TRACE_GROUPS", "BenchModel", "bench_model"]
+__all__ = ["TRACE_GROUPS", "BenchModel", "bench_model", "shared_params_of"]
 
 # Per-trace nuisances of every model, after the offset model's: name, unit, internal
 # scale. The horn's lag behind the logged flag differs at switch-on and switch-off (each
@@ -76,12 +77,30 @@ class BenchModel(eqx.Module):
     actuator: type[AbstractActuator] = eqx.field(static=True)
     noise: AbstractNoise = eqx.field(static=True)
     offset: type[AbstractOffset] = eqx.field(static=True)
+    # the user's fixed values, bounds, scales, starts and priors (:mod:`._settings`)
+    settings: tuple[ParameterSetting, ...] = eqx.field(static=True, default=())
 
     # ------------------------------------------------------------------ parameters
     @property
     def shared_params(self) -> tuple[Param, ...]:
-        """Shared parameters, physical first (module docstring)."""
-        return _shared_params(self.law, self.coupling, self.actuator)
+        """Estimated shared parameters, physical first (module docstring), with the
+        user's settings applied; the fixed ones are left out (:attr:`fixed`)."""
+        return shared_params_of(self.law, self.coupling, self.actuator, self.settings)
+
+    @property
+    def declared_params(self) -> tuple[Param, ...]:
+        """The shared parameters as the laws and models declare them, before the user's
+        settings (fixed ones included)."""
+        return shared_params_of(self.law, self.coupling, self.actuator, ())
+
+    @property
+    def fixed(self) -> dict[str, float]:
+        """The shared parameters the user fixed: name -> value (physical units)."""
+        return dict(fixed_values(self.declared_params, self.settings))
+
+    def complete(self, v: Mapping[str, Array]) -> dict[str, Array]:
+        """``v`` with the fixed parameters' values added: what the physics reads."""
+        return {**v, **{name: jnp.asarray(x) for name, x in self.fixed.items()}}
 
     @property
     def trace_groups(self) -> tuple[tuple[str, str, float], ...]:
@@ -151,10 +170,13 @@ class BenchModel(eqx.Module):
     # ------------------------------------------------------------------ physics
     def law_at(self, v: Mapping[str, Array], normal_load_n) -> AbstractFrictionLaw:
         """The friction law under ``normal_load_n`` [N] (``Fc = mu N``)."""
-        return self.law.at_load(v, normal_load_n)
+        return self.law.at_load(self.complete(v), normal_load_n)
 
     def coupling_of(self, v: Mapping[str, Array]) -> AbstractCoupling:
-        return self.coupling.from_values(v)
+        return self.coupling.from_values(self.complete(v))
+
+    def actuator_of(self, v: Mapping[str, Array]) -> AbstractActuator:
+        return self.actuator.from_values(self.complete(v))
 
     def friction_ratios(self, v: Mapping[str, Array], load_n, alpha, speed_m_s) -> Array:
         """FR at operating points (arrays of equal shape) from physical values ``v``
@@ -205,7 +227,7 @@ class BenchModel(eqx.Module):
             on_end_s=per_block(_add_trailing(d.on_end_s, v["delay_off_s"], extra)),
         )
         t = jnp.asarray(d.sub_time_s).reshape(d.sub_time_s.shape + (1,) * extra)
-        actuator = self.actuator.from_values(v)
+        actuator = self.actuator_of(v)
         start = jnp.asarray(d.sub_time_s)[jnp.asarray(d.first_block), 0]  # (traces,)
         offset = self.offset.offset_n(
             {g: per_block(v[g]) for g, _, _ in self.offset.trace_params}, t, per_block(start)
@@ -268,12 +290,16 @@ class BenchModel(eqx.Module):
         return r, t.T @ jtj_u @ t, t.T @ jtr_u, (lv, dlv, jtj_u, jtr_u)
 
 
-def _shared_params(
+def shared_params_of(
     law: type[AbstractFrictionLaw],
     coupling: type[AbstractCoupling],
     actuator: type[AbstractActuator],
+    settings: tuple[ParameterSetting, ...] = (),
 ) -> tuple[Param, ...]:
-    return (*law.fit_params, MU, *coupling.fit_params, *actuator.fit_params)
+    """The shared parameters of a law, coupling and actuator model, in ``z``'s order;
+    ``settings`` applied (the fixed ones left out)."""
+    every = (*law.fit_params, MU, *coupling.fit_params, *actuator.fit_params)
+    return apply_settings(every, settings) if settings else every
 
 
 def _trace_groups(offset: type[AbstractOffset]) -> tuple[tuple[str, str, float], ...]:
@@ -295,13 +321,16 @@ def bench_model(
     noise: str | type[AbstractNoise] = DEFAULT_NOISE,
     actuator: str | type[AbstractActuator] = DEFAULT_ACTUATOR,
     offset: str | type[AbstractOffset] = DEFAULT_OFFSET,
+    settings: tuple[ParameterSetting, ...] = (),
 ) -> BenchModel:
     """The :class:`BenchModel` of prepared ``data``; laws and models by registered name
-    or class.
+    or class; ``settings``: the user's fixed values, bounds, scales, starts and priors
+    (:mod:`idtool._model._settings`; those naming parameters this model lacks are
+    ignored).
 
     The per-trace nuisances and ``mu`` and the slopes start from values read off the
-    traces (:func:`idtool._data._blocks.start_values`); the other shared parameters
-    from their ``Param.start``.
+    traces (:func:`idtool._data._blocks.start_values`), unless the user gives a start;
+    the other shared parameters from their ``Param.start``.
     """
     law_cls = FRICTION_LAWS.get(law)
     coupling_cls = COUPLINGS.get(coupling)
@@ -310,12 +339,15 @@ def bench_model(
     offset_cls = OFFSETS.get(offset)
     groups_of_trace = _trace_groups(offset_cls)
     s = start_values(data)
-    shared = _shared_params(law_cls, coupling_cls, actuator_cls)
+    settings = tuple(settings)
+    shared = shared_params_of(law_cls, coupling_cls, actuator_cls, settings)
     guess = {
         "mu": s.friction_coefficient,
         "slope_n_s": s.slope_n_s,
         "startup_slope_n_s": s.startup_slope_n_s,
     }
+    # a start the user gives wins over the data's
+    guess |= {x.name: x.nominal for x in settings if x.estimate and x.nominal is not None}
     start_z = np.array([p.internal(guess.get(p.name, p.start)) for p in shared])
     n = data.n_traces
     centres = {"offset_n": s.offset_n, "pull_start_s": s.pull_start_s}
@@ -339,4 +371,5 @@ def bench_model(
         actuator=actuator_cls,
         noise=noise_cls(),
         offset=offset_cls,
+        settings=settings,
     )

@@ -56,7 +56,13 @@ from idtool._posterior._likelihood import (
     build_target,
     sampled_params,
 )
-from idtool._posterior._prior import Prior, default_prior, parse_priors, read_priors
+from idtool._posterior._prior import (
+    DISTRIBUTIONS,
+    Prior,
+    default_prior,
+    parse_priors,
+    read_priors,
+)
 from idtool._posterior._start import find_start, initial_walkers
 
 __all__ = ["CHAIN_FILE", "LogPosterior", "Posterior", "sample_posterior"]
@@ -226,6 +232,18 @@ def _settings(fit: FitLike, params, priors, noise, walkers, seed) -> dict:
     }
 
 
+def _setting_priors(model: BenchModel, params) -> dict[str, Prior]:
+    """The priors the fit's parameter settings give (:mod:`idtool._model._settings`)."""
+    out: dict[str, Prior] = {}
+    for s in model.settings:
+        if s.prior is not None:
+            dist, a, b = s.prior
+            k1, k2 = DISTRIBUTIONS[dist]
+            doc = {s.name: {"dist": dist, k1: a, k2: b}}
+            out |= parse_priors(doc, params, s.source or "parameter settings")
+    return out
+
+
 def _resolve(fit, noise, priors, stored: dict | None):
     """Noise model and priors: the stored ones on resume, else the given ones or defaults."""
     if stored is not None:
@@ -252,6 +270,7 @@ def _resolve(fit, noise, priors, stored: dict | None):
         overrides = parse_priors(raw, params, "priors")
     sd_names = {p.name for p in SD_PARAMS}
     table = {p.name: SD_PRIOR if p.name in sd_names else default_prior(p) for p in params}
+    table |= _setting_priors(fit.model, params)  # the fit's parameter table, then --priors
     table |= overrides
     if stored is not None:
         stored_table = parse_priors(stored["priors"], params, "chain.h5")

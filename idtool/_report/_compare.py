@@ -94,6 +94,12 @@ class ComparedFit:
             else:
                 value, ci, source = e.estimate, list(e.ci95), "fit"
             out[name] = {"unit": e.unit, "estimate": value, "ci95": ci, "source": source}
+        physical = {p.name for p in self.fit.model.declared_params if p.physical}
+        for name, value in self.fit.model.fixed.items():  # held by the user in the fit
+            if name not in physical:
+                continue
+            unit = self.fit.estimates[name].unit
+            out[name] = {"unit": unit, "estimate": value, "ci95": [value, value], "source": "fixed"}
         return out
 
 

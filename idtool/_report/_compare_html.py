@@ -126,14 +126,19 @@ def _interval(ci: Sequence[float]) -> str:
 
 def _estimates(c: Comparison) -> str:
     est = {f.label: f.estimates() for f in c.fits}
-    names = list(dict.fromkeys(n for f in c.fits for n in f.fit.model.physical_names))
+    names = list(dict.fromkeys(n for e in est.values() for n in e))  # fixed ones too
     rows = []
     for name in names:
         have = [e[name] for e in est.values() if name in e]
         row = [name, have[0]["unit"]]
         for f in c.fits:
             e = est[f.label].get(name)  # None: this fit's model has no such parameter
-            row.append("-" if e is None else f"{g(e['estimate'])} [{_interval(e['ci95'])}]")
+            if e is None:
+                row.append("-")
+            elif e["source"] == "fixed":
+                row.append(f"{g(e['estimate'])} (fixed by the user)")
+            else:
+                row.append(f"{g(e['estimate'])} [{_interval(e['ci95'])}]")
         rows.append(row)
     source = ["intervals from", ""] + [
         "posterior (median)" if f.has_posterior else "fit (no posterior)" for f in c.fits

@@ -21,13 +21,20 @@ _residuals = jax.jit(lambda model, z, phi: model.residuals(z, phi))
 
 
 def _est(e: Estimate) -> dict:
-    return {
+    out = {
         "estimate": e.estimate,
         "std_error": e.std_error,
         "ci95": [e.ci95[0], e.ci95[1]],
         "unit": e.unit,
         "at_bound": bool(e.at_bound),
     }
+    return out | {"fixed": True} if e.fixed else out
+
+
+def _fixed_physical(r: FitResult) -> list[str]:
+    """The physical parameters the user fixed (reported with the estimated ones)."""
+    physical = {p.name for p in r.model.declared_params if p.physical}
+    return [n for n in r.model.fixed if n in physical]
 
 
 def _shared_names(r: FitResult) -> list[str]:
@@ -40,7 +47,7 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
     d = run.data
     phys = list(r.model.physical_names)
     shared = _shared_names(r)
-    params = {name: _est(r.estimates[name]) for name in phys}
+    params = {name: _est(r.estimates[name]) for name in [*phys, *_fixed_physical(r)]}
     for name, prof in run.profiles.items():
         params[name]["profile_ci95"] = [prof.ci95[0], prof.ci95[1]]
     idx = [r.model.names.index(n) for n in shared]
@@ -73,7 +80,13 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
     law, coupling = r.model.law.name, r.model.coupling.name
     return {
         "parameters": params,
-        "bench": {name: _est(r.estimates[name]) for name in shared if name not in phys},
+        "bench": {
+            name: _est(r.estimates[name])
+            for name in [*shared, *r.model.fixed]
+            if name not in phys and name not in params
+        },
+        # the user's fixed values, bounds, scales, starts and priors (--fix, --parameters)
+        "parameter_settings": [s.to_dict() for s in r.model.settings],
         "traces": traces,
         "law": law,
         "coupling": coupling,
@@ -181,6 +194,8 @@ def _variability_lines(r: FitResult) -> list[str]:
 
 
 def _fmt(e: Estimate) -> str:
+    if e.fixed:
+        return f"{e.estimate:12.5g} {e.unit:4s} fixed by the user (not estimated)"
     rel = f"({100 * e.std_error / abs(e.estimate):.2g}%)" if e.estimate else ""
     flag = "  AT BOUND" if e.at_bound else ""
     return (
@@ -206,7 +221,7 @@ def fit_report(run: FitRun) -> str:
         "[[Physical parameters]]  (95% intervals from the Gauss-Newton covariance"
         + (", scatter and discrepancy included)" if r.variability is not None else ")"),
     ]
-    for name in r.model.physical_names:
+    for name in [*r.model.physical_names, *_fixed_physical(r)]:
         lines.append(f"    {name:22s}{_fmt(r.estimates[name])}")
         if name in run.profiles:
             lo, hi = run.profiles[name].ci95
@@ -214,8 +229,8 @@ def fit_report(run: FitRun) -> str:
     lines += _variability_lines(r)
     lines.append("[[Bench parameters]]")
     shared = _shared_names(r)
-    for name in shared:
-        if name not in r.model.physical_names:
+    for name in [*shared, *r.model.fixed]:
+        if name not in r.model.physical_names and name not in _fixed_physical(r):
             lines.append(f"    {name:22s}{_fmt(r.estimates[name])}")
     lines.append("[[Correlations]]  (|r| > 0.3)")
     idx = [r.model.names.index(n) for n in shared]

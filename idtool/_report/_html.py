@@ -276,12 +276,15 @@ def write_report(
             )
         )
         rows = []
-        meaning = {q.name: q.description for q in fit.model.shared_params}
-        for n in names:
+        meaning = {q.name: q.description for q in fit.model.declared_params}
+        fixed = [n for n, p in doc["parameters"].items() if p.get("fixed")]
+        for n in [*names, *fixed]:
             p = doc["parameters"][n]
             row = [n, meaning.get(n, ""), p["unit"], g(p["estimate"])]
             row += [f"[{g(p['ci95'][0])}, {g(p['ci95'][1])}]"]
-            if post is not None and n in post:
+            if n in fixed:
+                row[-1:] = ["fixed by the user", "-", "fixed (not sampled)"]
+            elif post is not None and n in post:
                 v = np.asarray(post[n].values).ravel()
                 lo, med, hi = np.percentile(v, [2.5, 50, 97.5])
                 row += [g(med), f"[{g(lo)}, {g(hi)}]"]

@@ -1,0 +1,55 @@
+"""``idtool parameters``: a model's shared parameters as a parameter table to edit."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from idtool._atomic import refuse_existing, write_text_atomic
+
+__all__ = ["register"]
+
+
+def _run(args: argparse.Namespace) -> int:
+    from idtool._fit._parameter_table import parameter_template
+    from idtool._model._actuator import ACTUATORS
+    from idtool._model._benchmodel import shared_params_of
+    from idtool._model._coupling import COUPLINGS
+    from idtool._model._laws import FRICTION_LAWS
+
+    params = shared_params_of(
+        FRICTION_LAWS.get(args.law), COUPLINGS.get(args.coupling), ACTUATORS.get(args.actuator)
+    )
+    table = parameter_template(params)
+    if args.out is None:
+        print(table, end="")
+        return 0
+    refuse_existing(Path(args.out), args.force)
+    write_text_atomic(Path(args.out), table)
+    print(f"wrote {args.out}: edit it, then 'idtool fit DATASET --parameters {args.out}'")
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from idtool import ACTUATORS, COUPLINGS, FRICTION_LAWS
+
+    fittable = [n for n in FRICTION_LAWS if FRICTION_LAWS.get(n).fit_params]
+    p = sub.add_parser(
+        "parameters",
+        help="write a model's parameter table (PEtab-like) for 'idtool fit --parameters'",
+        description="The shared parameters of a friction law, coupling law and actuator "
+        "model, one row each with idtool's unit, bounds and scale, every one estimated: "
+        "a parameter table to edit (fix a value with estimate 0 and nominalValue, narrow "
+        "the bounds, give a start or a prior) and pass to 'idtool fit --parameters'.",
+    )
+    p.add_argument("--law", choices=fittable, default="dahl", help="friction law (default dahl)")
+    p.add_argument(
+        "--coupling",
+        choices=COUPLINGS.names(),
+        default="power-limited",
+        help="coupling law (default power-limited)",
+    )
+    p.add_argument("--actuator", choices=ACTUATORS.names(), default="slope", help="actuator model")
+    p.add_argument("-o", "--out", help="write the table to this file (default: print it)")
+    p.add_argument("--force", action="store_true", help="replace an existing --out")
+    p.set_defaults(func=_run)
