@@ -79,7 +79,7 @@ _LAZY = {
     "transducer_steady_state": "idtool._model._transducer",
     "Prior": "idtool._posterior._prior",
     "Posterior": "idtool._posterior._sample",
-    "AmplitudeFor": "idtool._predict._predict",
+    "AmplitudeFor": "idtool._predict._amplitude",
     "Prediction": "idtool._predict._predict",
     "Amplitudes": "idtool._predict._tables",
     "Predictions": "idtool._predict._tables",
@@ -218,7 +218,8 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
     )
     from idtool._posterior._prior import Prior
     from idtool._posterior._sample import Posterior
-    from idtool._predict._predict import AmplitudeFor, Prediction
+    from idtool._predict._amplitude import AmplitudeFor
+    from idtool._predict._predict import Prediction
     from idtool._predict._tables import Amplitudes, Predictions
     from idtool._predict._validation import Validation
     from idtool._report._compare import Comparison, compare_fits

@@ -26,12 +26,13 @@ from idtool._errors import IdtoolError
 from idtool._fit._fit import Estimate, FitResult
 from idtool._fit._parameter_table import parse_fix, read_parameter_table
 from idtool._fit._run import FitRun, fit_dataset
-from idtool._fit._store import StoredFit, load_stored_fit, save_fit_state
+from idtool._fit._store import StoredFit, law_state_file, load_stored_fit, save_fit_state
 from idtool._model._benchmodel import BenchModel
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._settings import ParameterSetting
 from idtool._posterior._sample import Posterior, sample_posterior
 from idtool._posterior._store import POSTERIOR_FILE, load_posterior
+from idtool._predict._mixture import average_over_laws, chosen_law_weight
 from idtool._predict._predict import (
     Draws,
     draws_from_covariance,
@@ -220,11 +221,25 @@ class Fit:
         ``posterior.nc`` beside a loaded fit), else Gaussian on the fit's covariance."""
         grids, cond = self._state.sd_grids, self._state.conditioning
         if self.posterior is not None:
-            return draws_from_posterior(self.posterior, self.model, max_draws, grids, seed, cond)
-        if self.folder is not None and (self.folder / POSTERIOR_FILE).is_file():
+            draws = draws_from_posterior(self.posterior, self.model, max_draws, grids, seed, cond)
+        elif self.folder is not None and (self.folder / POSTERIOR_FILE).is_file():
             stored = load_posterior(self.folder / POSTERIOR_FILE)
-            return draws_from_stored(stored, self.model, max_draws, grids, seed, cond)
-        return draws_from_covariance(self.model, self.z, self.cov_z, max_draws, seed, grids, cond)
+            draws = draws_from_stored(stored, self.model, max_draws, grids, seed, cond)
+        else:
+            draws = draws_from_covariance(
+                self.model, self.z, self.cov_z, max_draws, seed, grids, cond
+            )
+        # averaged over the coupling laws the fit kept (fit coupling="auto")
+        others: Mapping[str, tuple[float, FitResult | StoredFit]]
+        if self.run is not None:
+            laws = self.run.coupling_weights
+            others = {law: (laws[law].bic_weight, f) for law, f in self.run.alternates.items()}
+            weight = laws[self.model.coupling.name].bic_weight
+        else:
+            assert isinstance(self._state, StoredFit)
+            others = self._state.alternates
+            weight = chosen_law_weight(self._state.doc, self.model.coupling.name)
+        return average_over_laws(draws, weight, others, seed)
 
     # ------------------------------------------------------------------ predictions
     def predict(
@@ -339,6 +354,8 @@ class Fit:
             (tmp / "fit.json").write_text(json.dumps(doc, indent=1) + "\n")
             (tmp / "report.txt").write_text(self.report() + "\n")
             save_fit_state(tmp, self.result)
+            for law, alternate in self.run.alternates.items():  # for averaged predictions
+                save_fit_state(tmp, alternate, law_state_file(law))
             if plots:
                 plot_fit(self.run, tmp)
         self.folder = out

@@ -15,6 +15,7 @@ import pytest
 
 import idtool
 from idtool import COUPLINGS, ExponentialCoupling
+from idtool._predict._predict import predict_friction_ratio
 
 A_MAX = 8.5e-5
 
@@ -123,21 +124,78 @@ def test_bic_picks_the_simulated_coupling_law(truth, tmp_path):
         assert "[[Coupling laws]]" in fit.report()
 
 
-@pytest.mark.slow
-def test_laws_that_fit_comparably_are_flagged():
-    """On the paper's 50/70% matrix every point lies past the knee: data from the
-    exponential law leave it and the power limit 0.3 BIC units apart (seed 2), and the
-    fit says that its predictions rest on one of two comparable shapes."""
+@pytest.fixture(scope="module")
+def comparable(tmp_path_factory):
+    """The paper's 50/70% matrix from the exponential law (seed 2): every point lies
+    past the knee, and the exponential law and the power limit fit comparably."""
     p = json.loads(idtool.example_params_path().read_text())
     p["coupling"] = {"law": "exponential", "gain": 0.03, "saturation_load_n": 125.0}
-    dataset, _ = idtool.simulate_bench(idtool.BenchParams.from_dict(p), seed=2)
+    bench = idtool.BenchParams.from_dict(p)
+    dataset, _ = idtool.simulate_bench(bench, seed=2)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         fit = idtool.fit(
             dataset, coupling="auto", actuator="slope", offset="constant", variability=False
         )
+    return bench, fit, fit.save(tmp_path_factory.mktemp("laws") / "fit", plots=False)
+
+
+@pytest.mark.slow
+def test_laws_that_fit_comparably_are_flagged(comparable):
+    """Exponential-law data leave it and the power limit 0.3 BIC units apart, and the
+    fit says that the laws fit comparably and that predictions average them."""
+    _, fit, _ = comparable
     weights = {n: w["bic_weight"] for n, w in fit.coupling_laws.items()}
     assert min(weights["exponential"], weights["power-limited"]) > 0.2
     flagged = [w for w in fit.warnings if w.startswith("the coupling laws fit comparably")]
     assert len(flagged) == 1
     assert "exponential" in flagged[0] and "power-limited" in flagged[0]
+    assert "predictions average the laws" in flagged[0]
+
+
+@pytest.mark.slow
+def test_predictions_average_the_laws_and_cover_what_one_law_misses(comparable):
+    """Below the tested loads the two saturating laws part: the chosen law's band
+    misses the truth (exponential-law data), the BIC-weighted average covers it, and
+    says that the laws disagree there; at the tested loads they agree."""
+    from idtool._simulate._simulate import operating_point
+
+    bench, fit, _ = comparable
+    weights = {n: w["bic_weight"] for n, w in fit.coupling_laws.items()}
+    draws = fit.draws(max_draws=2000)
+    kept = {n: w for n, w in weights.items() if w >= 1e-3}  # the constant law: ~1e-200
+    total = sum(kept.values())
+    assert draws.law_weights == pytest.approx({n: w / total for n, w in kept.items()})
+    for component in draws.components:  # each law's share of the draws, to rounding
+        share = draws.law_weights[component.model.coupling.name]
+        assert abs(component.n - 2000 * share) <= 1.0
+    chosen = draws.components[0]
+    for load in (60.0, 150.0):
+        truth = operating_point(bench, load, 0.5)["friction_ratio"]
+        averaged = fit.predict(load, 0.5)
+        lo, hi = averaged[0].ci95
+        assert lo <= truth <= hi, (load, truth, lo, hi)
+        alone = predict_friction_ratio(chosen, [load], [0.5], [0.025])[0]
+        if chosen.model.coupling.name != "exponential":
+            assert not alone.ci95[0] <= truth <= alone.ci95[1], (load, truth, alone.ci95)
+        laws = dict(averaged[0].by_law)
+        assert set(laws) == {"exponential", "power-limited"}
+        assert any(w.startswith("the coupling laws disagree") for w in averaged.warnings)
+        assert averaged.to_dict()["rows"][0]["by_coupling_law"] == laws
+    tested = fit.predict(450.0, 0.5)
+    assert not any(w.startswith("the coupling laws disagree") for w in tested.warnings)
+
+
+@pytest.mark.slow
+def test_a_saved_fit_keeps_the_laws_it_averages(comparable):
+    _, fit, folder = comparable
+    doc = json.loads((folder / "fit.json").read_text())
+    files = {w["law"]: w.get("state_file") for w in doc["coupling_laws"]}
+    chosen = fit.model.coupling.name
+    other = ({"exponential", "power-limited"} - {chosen}).pop()
+    assert files[chosen] is None and files["constant"] is None  # chosen: fit_state.npz
+    assert (folder / files[other]).is_file()
+    back = idtool.load_fit(folder)
+    assert set(back._state.alternates) == {other}
+    a, b = fit.predict(60.0, 0.5)[0], back.predict(60.0, 0.5)[0]
+    assert (a.median, a.ci95, a.by_law) == (b.median, b.ci95, b.by_law)

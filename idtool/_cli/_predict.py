@@ -36,7 +36,9 @@ def _run(args: argparse.Namespace) -> int:
         raise IdtoolError(f"--draws {args.draws}: give at least 10")
     fit = idtool.load_fit(args.fit)
     draws = fit.draws(args.draws, args.seed)
-    doc: dict = {"source": draws.source, "note": draws.note, "n_draws": draws.n}
+    n_draws = sum(c.n for c in draws.components)  # every coupling law's, when averaged
+    doc: dict = {"source": draws.source, "note": draws.note, "n_draws": n_draws}
+    doc |= {"coupling_law_weights": draws.law_weights} if draws.law_weights else {}
     lines = [f"draws: {draws.note}"]
     notes: list[str] = []
     if args.amplitude is not None:
@@ -61,6 +63,9 @@ def _run(args: argparse.Namespace) -> int:
                 f"{p.normal_load_n:9g} {p.amplitude_fraction:9g} {p.pull_speed_m_s:8g}   "
                 f"{fr:27s}{new:27s}{red:.1f} [{rlo:.1f}, {rhi:.1f}]"
             )
+            if p.by_law:  # averaged over coupling laws: each law's own median
+                laws = ", ".join(f"{law} {m:.4f}" for law, m in p.by_law)
+                lines.append(f"{'':30s}mean FR by coupling law: {laws}")
     if args.target_reduction is not None:
         inverse = fit.amplitude_for(
             args.target_reduction, args.load, args.speed, max_draws=args.draws, seed=args.seed

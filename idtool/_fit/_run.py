@@ -70,6 +70,9 @@ class FitRun:
     reason: str
     seed: int
     profiles: dict[str, Profile] = dataclasses.field(default_factory=dict)
+    # the other coupling laws' best fits whose BIC weight reaches MIN_LAW_WEIGHT, by law
+    # (with the levels model when the chosen fit has it): predictions average over them
+    alternates: dict[str, FitResult] = dataclasses.field(default_factory=dict)
 
     @property
     def ranking(self) -> list[tuple[str, FitResult]]:
@@ -79,6 +82,11 @@ class FitRun:
     def coupling_weights(self) -> dict[str, LawWeight]:
         """Each fitted coupling law's criteria and weights (:func:`coupling_weights`)."""
         return coupling_weights(self.candidates)
+
+
+# A coupling law below this BIC weight adds nothing a prediction can show (fewer than 2
+# of 2000 draws), and is not kept for averaging.
+MIN_LAW_WEIGHT = 1e-3
 
 
 def _key(law: str, coupling: str, actuator: str, offset: str) -> str:
@@ -229,15 +237,21 @@ def fit_dataset(
         best = candidates[best_key] = with_variability(best)
     weights = coupling_weights(candidates)
     chosen = weights[best.model.coupling.name]
+    alternates = {}
+    for w in weights.values():
+        if w is not chosen and w.bic_weight >= MIN_LAW_WEIGHT:
+            say(f"the levels model of {w.key} (BIC weight {w.bic_weight:.3f})")
+            fit = candidates[w.key]
+            alternates[w.law] = with_variability(fit) if variability else fit
     rivals = [w for w in weights.values() if w is not chosen and w.bic_weight > 0.05]
     if rivals:  # the data do not single out the coupling's shape
         run_warnings.append(
             f"the coupling laws fit comparably (BIC weight {chosen.law} "
             f"{chosen.bic_weight:.2f}, "
             + ", ".join(f"{w.law} {w.bic_weight:.2f}" for w in rivals)
-            + "): the estimates and predictions are the chosen law's alone, and between "
-            "or beyond the measured operating points the laws may disagree by more than "
-            "its bands; compare the laws' fits before relying on them there"
+            + "): the estimates are the chosen law's; predictions average the laws by "
+            "their BIC weights, so where the laws disagree (between or beyond the "
+            "measured operating points) the bands include their spread"
         )
     if run_warnings:  # for the fit report
         best = candidates[best_key] = dataclasses.replace(
@@ -260,7 +274,7 @@ def fit_dataset(
     if profile:
         for name in best.model.physical_names:
             profiles[name] = profile_parameter(best, name)
-    return FitRun(data, best, candidates, reason, seed, profiles)
+    return FitRun(data, best, candidates, reason, seed, profiles, alternates)
 
 
 def check_settings(

@@ -22,13 +22,19 @@ from idtool._fit._variability import FreeLevels, discrepancy_conditioning
 from idtool._model._benchmodel import BenchModel, bench_model
 from idtool._model._settings import ParameterSetting
 
-__all__ = ["STATE_FILE", "StoredFit", "load_stored_fit", "save_fit_state"]
+__all__ = ["STATE_FILE", "StoredFit", "law_state_file", "load_stored_fit", "save_fit_state"]
 
 STATE_FILE = "fit_state.npz"
 
 
-def save_fit_state(folder: Path, result: FitResult) -> None:
-    """Write ``fit_state.npz`` (internal vector, covariance, phi, parameter names)."""
+def law_state_file(law: str) -> str:
+    """The state file of another coupling law's fit, kept for averaged predictions."""
+    return f"fit_state_{law}.npz"
+
+
+def save_fit_state(folder: Path, result: FitResult, name: str = STATE_FILE) -> None:
+    """Write ``fit_state.npz`` (internal vector, covariance, phi, parameter names), or
+    another law's state as ``name``."""
     arrays: dict[str, np.ndarray] = {
         "z": result.z,
         "cov_z": result.cov_z,
@@ -49,7 +55,7 @@ def save_fit_state(folder: Path, result: FitResult) -> None:
             "levels_cov_y": free.cov_y,
             "levels_sigma_n": np.array(free.sigma_n),
         }
-    np.savez(folder / STATE_FILE, **arrays)  # type: ignore[arg-type]  # numpy stubs: allow_pickle
+    np.savez(folder / name, **arrays)  # type: ignore[arg-type]  # numpy stubs: allow_pickle
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,6 +74,8 @@ class StoredFit:
     sd_grids: dict[str, tuple[np.ndarray, np.ndarray]] = dataclasses.field(default_factory=dict)
     # the free levels and the sds (estimate, ci95 lo, hi), or None when off
     levels: tuple[FreeLevels, dict[str, tuple[float, float, float]]] | None = None
+    # other coupling laws' fits kept for averaged predictions: law -> (BIC weight, fit)
+    alternates: dict[str, tuple[float, StoredFit]] = dataclasses.field(default_factory=dict)
 
     @property
     def conditioning(self) -> Conditioning | None:
@@ -117,7 +125,6 @@ def load_stored_fit(folder: str | Path) -> StoredFit:
             raise IdtoolError(f"{path}: not found; is {folder} the output of 'idtool fit'?")
     try:
         doc = json.loads(doc_path.read_text())
-        state = np.load(state_path)
         ds_info = doc["dataset"]
         noise = doc["noise"]
         mains_hz = float(noise["mains_hz"])
@@ -147,32 +154,45 @@ def load_stored_fit(folder: str | Path) -> StoredFit:
             f"{doc_path}: the fit averaged over blocks of {periods_used} mains periods, this "
             f"idtool makes blocks of {data.periods_per_block} whole periods; run 'idtool fit' again"
         )
-    model = bench_model(
-        data,
-        doc["law"],
+    settings = tuple(ParameterSetting.from_dict(s) for s in doc.get("parameter_settings", []))
+
+    def stored(coupling: str, actuator: str, offset: str, path: Path, alternates) -> StoredFit:
+        model = bench_model(
+            data, doc["law"], coupling, doc["noise"].get("name", "ar1"), actuator, offset, settings
+        )
+        state = np.load(path)
+        if tuple(state["names"]) != model.names:
+            raise IdtoolError(f"{path}: parameters do not match the model; fit again")
+        return StoredFit(
+            folder=folder,
+            doc=doc,
+            dataset=dataset,
+            model=model,
+            z=np.asarray(state["z"]),
+            cov_z=np.asarray(state["cov_z"]),
+            phi=float(state["phi"]),
+            sigma_n=float(state["sigma_n"]),
+            sd_grids={
+                key.split(":", 1)[1]: (state[key][0], state[key][1])
+                for key in state.files
+                if key.startswith("sd_grid:")
+            },
+            levels=_stored_levels(state),
+            alternates=alternates,
+        )
+
+    alternates = {}
+    for w in doc.get("coupling_laws", []):  # law/coupling/actuator/offset in "key"
+        if "state_file" in w:
+            _, coupling, actuator, offset = w["key"].split("/")
+            alt = stored(coupling, actuator, offset, folder / w["state_file"], {})
+            alternates[w["law"]] = (float(w["bic_weight"]), alt)
+    return stored(
         doc["coupling"],
-        doc["noise"].get("name", "ar1"),
         doc.get("actuator", {}).get("name", "slope"),  # fits before the lag model: slope
         doc.get("offset", {}).get("name", "constant"),  # before the drift model: constant
-        tuple(ParameterSetting.from_dict(s) for s in doc.get("parameter_settings", [])),
-    )
-    if tuple(state["names"]) != model.names:
-        raise IdtoolError(f"{state_path}: parameters do not match the model; fit again")
-    return StoredFit(
-        folder=folder,
-        doc=doc,
-        dataset=dataset,
-        model=model,
-        z=np.asarray(state["z"]),
-        cov_z=np.asarray(state["cov_z"]),
-        phi=float(state["phi"]),
-        sigma_n=float(state["sigma_n"]),
-        sd_grids={
-            key.split(":", 1)[1]: (state[key][0], state[key][1])
-            for key in state.files
-            if key.startswith("sd_grid:")
-        },
-        levels=_stored_levels(state),
+        state_path,
+        alternates,
     )
 
 

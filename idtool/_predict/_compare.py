@@ -33,7 +33,7 @@ import numpy as np
 from idtool._data._blocks import FitData
 from idtool._data._dataset import Rig
 from idtool._errors import IdtoolError
-from idtool._predict._predict import Draws, friction_ratio_draws
+from idtool._predict._predict import Draws, _thin, friction_ratio_draws
 
 __all__ = [
     "PairPoint",
@@ -160,14 +160,12 @@ def thinned(draws: Draws, max_draws: int) -> Draws:
     order, so the first ones would all be early steps): for curves and the amplitude
     inverse, which solve the contact model per draw at many points (about 65 us a
     solve on 2 cores)."""
-    if draws.n <= max_draws:
+    total = sum(c.n for c in draws.components)
+    if total <= max_draws:
         return draws
-    idx = np.unique(np.linspace(0, draws.n - 1, max_draws).round().astype(int))
-    return dataclasses.replace(
-        draws,
-        values={k: v[idx] for k, v in draws.values.items()},
-        sds={k: v[idx] for k, v in draws.sds.items()},
-    )
+    # each coupling law's draws keep their share (:mod:`idtool._predict._mixture`)
+    parts = [c.subset(_thin(c.n, max(1, round(max_draws * c.n / total)))) for c in draws.components]
+    return dataclasses.replace(parts[0], mixture=tuple(parts[1:]))
 
 
 def tested_values(data: FitData, name: str) -> list[float]:

@@ -1,15 +1,9 @@
-"""Predictions of the friction ratio from a posterior (issue 5), and the inverse.
+"""Predictions of the friction ratio from a posterior (issue 5); the inverse (the
+amplitude for a target) is :mod:`idtool._predict._amplitude`.
 
-Forward: for every draw of the physical parameters, the contact model's friction ratio
-FR at an operating point (normal load, commanded amplitude fraction, pull speed); the
-median and the central 95% band over draws; the reduction is ``100 (1 - FR)`` %.
-
-Inverse: the amplitude fraction in [0, 1] at which FR falls to ``1 - target / 100``, per
-draw by bisection (FR falls monotonically as the commanded amplitude grows: the slip
-amplitude grows with it, power-limited or not). Draws for which even full amplitude
-does not reach the target count as "out of reach" (+inf), so the band's upper end, or
-the median itself, may be out of reach; the answer says so, with the reduction full
-amplitude does give.
+For every draw of the physical parameters, the contact model's friction ratio FR at an
+operating point (normal load, commanded amplitude fraction, pull speed); the median and
+the central 95% band over draws; the reduction is ``100 (1 - FR)`` %.
 
 Draws come from ``posterior.nc`` when there is one; without it, from a Gaussian on the
 fit's internal scale with the fit's covariance (say so: it is a local approximation).
@@ -19,8 +13,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import math
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -28,29 +20,23 @@ import numpy as np
 
 from idtool._data._blocks import FitData
 from idtool._fit._discrepancy import Conditioning, discrepancy_moments, operating_coordinates
-from idtool._fit._store import StoredFit
 from idtool._model._benchmodel import BenchModel
 from idtool._posterior._sample import Posterior
-from idtool._posterior._store import POSTERIOR_FILE, PosteriorDraws, load_posterior
+from idtool._posterior._store import PosteriorDraws
 
 SD_NAMES = ("discrepancy_fr", "scatter_fr")  # the sds a prediction uses
 
 __all__ = [
-    "AmplitudeFor",
     "Draws",
     "Prediction",
-    "amplitude_for_reduction",
     "draws_from_covariance",
     "draws_from_posterior",
     "draws_from_stored",
     "extrapolation_notes",
     "friction_ratio_draws",
     "predict_friction_ratio",
-    "prediction_draws",
     "predictions_from_draws",
 ]
-
-_BISECTIONS = 40  # amplitude resolution 2^-40
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,10 +58,31 @@ class Draws:
     sds: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     seed: int = 0
     conditioning: Conditioning | None = None
+    # other coupling laws' draws, each as many as its BIC weight's share: predictions
+    # pool them with these (:mod:`idtool._predict._mixture`); law -> weight of each
+    mixture: tuple[Draws, ...] = ()
+    law_weights: dict[str, float] = dataclasses.field(default_factory=dict)
 
     @property
     def n(self) -> int:
+        """Draws of this component (of its own law)."""
         return int(next(iter(self.values.values())).size)
+
+    @functools.cached_property
+    def components(self) -> tuple[Draws, ...]:
+        """This law's draws, then each other law's (one component without a mixture)."""
+        if not self.mixture:
+            return (self,)
+        return (dataclasses.replace(self, mixture=()), *self.mixture)
+
+    def subset(self, idx: np.ndarray) -> Draws:
+        """The draws at ``idx`` (of this component; no mixture)."""
+        return dataclasses.replace(
+            self,
+            values={k: x[idx] for k, x in self.values.items()},
+            sds={k: x[idx] for k, x in self.sds.items()},
+            mixture=(),
+        )
 
     @functools.cached_property
     def kriging(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -224,17 +231,6 @@ def draws_from_covariance(
     return Draws(model, values, "fit covariance", note, sds, seed, conditioning)
 
 
-def prediction_draws(fit: StoredFit, max_draws: int = 2000, seed: int = 0) -> Draws:
-    """Posterior draws of a stored fit (``posterior.nc`` beside it), or Gaussian draws
-    from its covariance when it has none."""
-    path = Path(fit.folder) / POSTERIOR_FILE
-    cond = fit.conditioning
-    if path.is_file():
-        stored = load_posterior(path)
-        return draws_from_stored(stored, fit.model, max_draws, fit.sd_grids, seed, cond)
-    return draws_from_covariance(fit.model, fit.z, fit.cov_z, max_draws, seed, fit.sd_grids, cond)
-
-
 def extrapolation_notes(data: FitData, loads_n=(), amplitudes=(), speeds_m_s=()) -> list[str]:
     """One note per quantity whose requested values leave the range the fit saw."""
     notes = []
@@ -274,6 +270,8 @@ class Prediction:
     median: float
     ci95: tuple[float, float]
     new_trace: tuple[float, tuple[float, float]] | None = None
+    # averaged over coupling laws: each law's median mean FR, (law, median), chosen first
+    by_law: tuple[tuple[str, float], ...] = ()
 
     @property
     def reduction_percent(self) -> tuple[float, tuple[float, float]]:
@@ -291,7 +289,7 @@ class Prediction:
             "friction_ratio": {"median": self.median, "ci95": list(self.ci95)},
             "new_trace": {"median": nmed, "ci95": [nlo, nhi]},
             "reduction_percent": {"median": red, "ci95": [rlo, rhi]},
-        }
+        } | ({"by_coupling_law": dict(self.by_law)} if self.by_law else {})
 
 
 def _band(x: np.ndarray, axis: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -305,7 +303,11 @@ def friction_ratio_draws(
     """Per draw, FR at the operating points ``(load_n[i] [N], amplitude[i] (fraction of
     the maximum), speed_m_s[i] [m/s])`` (equal-length sequences): the mean FR there
     (the curve with its discrepancy) and a next pull's (scatter added), each (draws,
-    points); :func:`with_variability`. Every forward prediction goes through here."""
+    points); :func:`with_variability`. Every forward prediction goes through here;
+    averaged over coupling laws, every law's draws pooled."""
+    if draws.mixture:
+        parts = [friction_ratio_draws(c, load_n, amplitude, speed_m_s) for c in draws.components]
+        return np.concatenate([m for m, _ in parts]), np.concatenate([n for _, n in parts])
     load, alpha, speed = (np.asarray(x, float).reshape(-1) for x in (load_n, amplitude, speed_m_s))
     v = {k: jnp.asarray(x) for k, x in draws.values.items()}
     fr = np.asarray(
@@ -320,7 +322,18 @@ def predict_friction_ratio(draws: Draws, loads_n, amplitudes, speeds_m_s) -> lis
         [(n, a, s) for n in loads_n for a in amplitudes for s in speeds_m_s], float
     ).reshape(-1, 3)
     mean, new = friction_ratio_draws(draws, grid[:, 0], grid[:, 1], grid[:, 2])
-    return predictions_from_draws(grid, mean, new)
+    out = predictions_from_draws(grid, mean, new)
+    if not draws.mixture:
+        return out
+    # each law's own median curve, for the report and to show where the laws disagree
+    medians, start = [], 0
+    for c in draws.components:
+        medians.append((c.model.coupling.name, np.median(mean[start : start + c.n], axis=0)))
+        start += c.n
+    return [
+        dataclasses.replace(p, by_law=tuple((law, float(m[i])) for law, m in medians))
+        for i, p in enumerate(out)
+    ]
 
 
 def predictions_from_draws(grid: np.ndarray, mean: np.ndarray, new: np.ndarray) -> list[Prediction]:
@@ -357,129 +370,3 @@ def with_variability(fr: np.ndarray, draws: Draws, x: np.ndarray) -> tuple[np.nd
     scatter = draws.sds.get("scatter_fr", zero)[:, None]
     new = disc + scatter * rng.standard_normal(fr.shape)
     return np.minimum(fr * np.exp(disc), 1.0), np.minimum(fr * np.exp(new), 1.0)
-
-
-@dataclasses.dataclass(frozen=True)
-class AmplitudeFor:
-    """The amplitude fraction for a target reduction at one load and speed.
-
-    ``amplitude`` is (median, 2.5%, 97.5%) over draws, ``inf`` where out of reach;
-    ``max_reduction_percent`` is the reduction at full amplitude (median, band).
-    """
-
-    normal_load_n: float
-    pull_speed_m_s: float
-    target_reduction_percent: float
-    probability_reachable: float
-    amplitude: tuple[float, float, float]
-    max_reduction_percent: tuple[float, float, float]
-
-    @property
-    def reachable(self) -> bool:
-        return math.isfinite(self.amplitude[0])
-
-    def statement(self) -> str:
-        med, lo, hi = self.amplitude
-        rmed, rlo, rhi = self.max_reduction_percent
-        where = f"at {self.normal_load_n:g} N, {self.pull_speed_m_s:g} m/s"
-        full = f"full amplitude gives {rmed:.1f}% (95% band {rlo:.1f}-{rhi:.1f}%)"
-        target = f"{self.target_reduction_percent:g}% reduction"
-        if not self.reachable:
-            return (
-                f"{target} is out of reach {where}: {full}; reachable in "
-                f"{100 * self.probability_reachable:.0f}% of the draws"
-            )
-        if not math.isfinite(hi):
-            return (
-                f"{target} {where} needs amplitude {med:.3f} (95% band {lo:.3f} to out of "
-                f"reach: {100 * (1 - self.probability_reachable):.0f}% of the draws do not "
-                f"reach it at full amplitude; {full})"
-            )
-        return f"{target} {where} needs amplitude {med:.3f} (95% band {lo:.3f}-{hi:.3f})"
-
-    def to_dict(self) -> dict:
-        def num(x: float) -> float | None:
-            return x if math.isfinite(x) else None
-
-        med, lo, hi = self.amplitude
-        rmed, rlo, rhi = self.max_reduction_percent
-        return {
-            "normal_load_n": self.normal_load_n,
-            "pull_speed_m_s": self.pull_speed_m_s,
-            "target_reduction_percent": self.target_reduction_percent,
-            "reachable": self.reachable,
-            "probability_reachable": self.probability_reachable,
-            "amplitude_fraction": {"median": num(med), "ci95": [num(lo), num(hi)]},
-            "max_reduction_percent": {"median": rmed, "ci95": [rlo, rhi]},
-            "statement": self.statement(),
-        }
-
-
-@jax.jit
-def _amplitude_draws(model: BenchModel, v, load, speed, target_fr, kriging, xi):
-    """Per draw in ``v``: the amplitude fraction where the mean FR (the curve times
-    exp(d), d the discrepancy given the data, ``d = mean + sd xi`` with ``xi`` one
-    standard normal per draw: :attr:`Draws.kriging`) falls to ``target_fr`` at ``load``
-    and ``speed`` (inf if full amplitude does not reach it), and that FR at full
-    amplitude."""
-    x_rows, scales, weights, s_inv, sd = kriging
-
-    def solve(v, weights, s_inv, sd, xi):
-        def fr_at(alpha):
-            fr = model.friction_ratios(v, load[None], alpha[None], speed[None])[0]
-            x = operating_coordinates(load, alpha, speed)[None]
-            mean, var = discrepancy_moments(x, x_rows, scales, weights, s_inv, sd)
-            return jnp.minimum(fr * jnp.exp(mean[0] + jnp.sqrt(var[0]) * xi), 1.0)
-
-        def step(_, bounds):
-            lo, hi = bounds
-            mid = 0.5 * (lo + hi)
-            below = fr_at(mid) <= target_fr  # enough reduction already at mid
-            return jnp.where(below, lo, mid), jnp.where(below, mid, hi)
-
-        fr_full = fr_at(jnp.asarray(1.0))
-        lo, hi = jax.lax.fori_loop(0, _BISECTIONS, step, (jnp.asarray(0.0), jnp.asarray(1.0)))
-        alpha = jnp.where(fr_full <= target_fr, 0.5 * (lo + hi), jnp.inf)
-        return alpha, fr_full
-
-    return jax.vmap(solve)(v, weights, s_inv, sd, xi)
-
-
-def amplitude_for_reduction(
-    draws: Draws, target_reduction_percent: float, loads_n, speeds_m_s
-) -> list[AmplitudeFor]:
-    """The amplitude for ``target_reduction_percent`` at every load x speed."""
-    target_fr = jnp.asarray(1.0 - target_reduction_percent / 100.0)
-    v = {k: jnp.asarray(x) for k, x in draws.values.items()}
-    # The mean curve carries the discrepancy: one standard normal per draw for its
-    # conditional spread along the amplitude axis.
-    xi = np.random.default_rng([draws.seed, 3]).standard_normal(draws.n)
-    kriging = tuple(jnp.asarray(a) for a in draws.kriging)
-    out = []
-    for load in loads_n:
-        for speed in speeds_m_s:
-            alpha, fr_full = _amplitude_draws(
-                draws.model,
-                v,
-                jnp.asarray(float(load)),
-                jnp.asarray(float(speed)),
-                target_fr,
-                kriging,
-                jnp.asarray(xi),
-            )
-            alpha, fr_full = np.asarray(alpha), np.asarray(fr_full)
-            # quantiles that are actual draws: no interpolation towards +inf
-            lo, med, hi = np.percentile(alpha, [2.5, 50.0, 97.5], method="inverted_cdf")
-            med, lo, hi = float(med), float(lo), float(hi)
-            rmed, rlo, rhi = (float(x) for x in _band(100.0 * (1.0 - fr_full)))
-            out.append(
-                AmplitudeFor(
-                    normal_load_n=float(load),
-                    pull_speed_m_s=float(speed),
-                    target_reduction_percent=float(target_reduction_percent),
-                    probability_reachable=float(np.mean(np.isfinite(alpha))),
-                    amplitude=(med, lo, hi),
-                    max_reduction_percent=(rmed, rlo, rhi),
-                )
-            )
-    return out

@@ -15,11 +15,11 @@ import numpy as np
 
 from idtool._data._blocks import FitData
 from idtool._errors import IdtoolError
+from idtool._predict._amplitude import AmplitudeFor, amplitude_for_reduction
+from idtool._predict._mixture import law_disagreement_notes
 from idtool._predict._predict import (
-    AmplitudeFor,
     Draws,
     Prediction,
-    amplitude_for_reduction,
     extrapolation_notes,
     predict_friction_ratio,
 )
@@ -115,6 +115,7 @@ def predict_table(
     speeds = _speeds(data, speed_m_s)
     rows = predict_friction_ratio(draws, loads, amps, speeds)
     notes = extrapolation_notes(data, loads, amps, speeds)
+    notes += law_disagreement_notes(rows, draws.law_weights)
     return Predictions(tuple(rows), draws.source, draws.note, tuple(notes))
 
 

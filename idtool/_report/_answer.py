@@ -23,7 +23,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from idtool._fit._store import StoredFit
-from idtool._predict._predict import AmplitudeFor, Draws
+from idtool._predict._amplitude import AmplitudeFor
+from idtool._predict._predict import Draws
 from idtool._predict._tables import amplitude_table, predict_table
 from idtool._report._page import table
 

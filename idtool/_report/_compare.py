@@ -25,6 +25,7 @@ from idtool._atomic import atomic_output_dir
 from idtool._errors import IdtoolError
 from idtool._fit._variability import MISFIT
 from idtool._posterior._store import POSTERIOR_FILE
+from idtool._predict._amplitude import AmplitudeFor
 from idtool._predict._compare import (
     PairPoint,
     comparability,
@@ -33,7 +34,6 @@ from idtool._predict._compare import (
     thinned,
 )
 from idtool._predict._predict import (
-    AmplitudeFor,
     Draws,
     Prediction,
     extrapolation_notes,

@@ -7,7 +7,9 @@ from pathlib import Path
 import numpy as np
 
 from idtool._plotting import MAX_WIDTH_IN, save_figure, subplots
-from idtool._predict._predict import Draws, amplitude_for_reduction, predict_friction_ratio
+from idtool._predict._amplitude import amplitude_for_reduction
+from idtool._predict._mixture import law_medians
+from idtool._predict._predict import Draws, predict_friction_ratio
 
 __all__ = [
     "amplitude_map_figure",
@@ -115,7 +117,7 @@ def friction_ratio_figures(
         lo, hi = (np.array([p.ci95[j] for p in preds]) for j in (0, 1))
         new = [p.new_trace or (p.median, p.ci95) for p in preds]
         new_lo, new_hi = (np.array([n[1][j] for n in new]) for j in (0, 1))
-        return med, lo, hi, new_lo, new_hi
+        return med, lo, hi, new_lo, new_hi, law_medians(preds)
 
     def own(p):  # the trace's own FR and its 95% half-width, or None
         free = p.get("free_friction_ratio")
@@ -153,16 +155,25 @@ def friction_ratio_figures(
             fontsize=9,
             color="0.35",
         )
+        styles = ("--", ":", "-.")
+        laws: list[str] = []
         for c, value in enumerate(groups):
-            med, lo, hi, new_lo, new_hi = curve(value)
+            med, lo, hi, new_lo, new_hi, by_law = curve(value)
             ax.fill_between(x_grid, new_lo, new_hi, color=f"C{c}", alpha=0.12, lw=0)
             ax.fill_between(x_grid, lo, hi, color=f"C{c}", alpha=0.35, lw=0)
             ax.plot(x_grid, med, color=f"C{c}", label=label(value))
+            # averaged over coupling laws: each law's own median curve, thin
+            for j, m in enumerate(by_law.values()):
+                ax.plot(x_grid, m, styles[j % len(styles)], color=f"C{c}", lw=0.9)
+            laws = list(by_law)
             marks(ax, key, value, x_key)
+        for j, law in enumerate(laws):  # one legend entry per law's line style
+            ax.plot([], [], styles[j % len(styles)], color="0.3", lw=0.9, label=f"{law} law")
         ax.set(xlabel=xlabel, ylabel="friction ratio FR [-]", ylim=(0, 1.05))
-        ax.legend(title=title)
+        ax.legend(title=title, fontsize=9)
+        what = "averaged over coupling laws (thin lines: each law)\n" if laws else ""
         ax.set_title(
-            "dark: mean FR 95%; light: next pull 95%; points: each trace;\n"
+            f"{what}dark: mean FR 95%; light: next pull 95%; points: each trace;\n"
             "grey: the tested range (outside it the model extrapolates)",
             fontsize=9,
         )

@@ -10,6 +10,7 @@ import numpy as np
 
 from idtool._fit._fit import Estimate, FitResult
 from idtool._fit._run import FitRun
+from idtool._fit._store import law_state_file
 from idtool._provenance import provenance
 from idtool._version import __version__
 
@@ -123,7 +124,11 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
         ],
         "choice": run.reason,
         # each coupling law's best candidate and its Akaike/Schwarz weight
-        "coupling_laws": [w.to_dict() for w in run.coupling_weights.values()],
+        # (with the state file of each other law that predictions average over)
+        "coupling_laws": [
+            w.to_dict() | ({"state_file": law_state_file(w.law)} if w.law in run.alternates else {})
+            for w in run.coupling_weights.values()
+        ],
         "multistart": [
             {
                 "rss": o["rss"],

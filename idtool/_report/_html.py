@@ -22,7 +22,7 @@ from idtool._errors import IdtoolError
 from idtool._fit._store import load_stored_fit
 from idtool._fit._variability import MISFIT
 from idtool._posterior._store import POSTERIOR_FILE
-from idtool._predict._predict import prediction_draws
+from idtool._predict._mixture import prediction_draws
 from idtool._report._answer import answer
 from idtool._report._page import (
     g,
@@ -198,11 +198,28 @@ def _header(fit, meta: dict | None, rid: str) -> str:
         ["dataset", f"{ds.name}: {len(ds.traces)} traces; sha256 {ds.sha256}"],
         ["description", ds.description or "-"],
         ["fit", f"{fit.doc.get('created_utc', '-')}; {fit.doc['command']}"],
+        ["model", _model_line(fit)],
         ["posterior", posterior],
         ["report", f"{rid}, {now_utc()}, idtool {fit.doc['idtool_version']}"],
     ]
     rows += [[key, str(value)] for key, value in ds.extensions.items()]
     return table(None, rows, cls="meta")
+
+
+def _model_line(fit) -> str:
+    """The chosen model in words, and the coupling laws predictions average over."""
+    m = fit.model
+    line = (
+        f"{m.law.name} friction, {m.coupling.name} coupling, {m.actuator.name} actuator, "
+        f"{m.offset.name} load-cell offset"
+    )
+    if fit.alternates:
+        weights = {w["law"]: w["bic_weight"] for w in fit.doc.get("coupling_laws", [])}
+        kept = [m.coupling.name, *fit.alternates]
+        line += "; predictions averaged over the coupling laws by BIC weight: " + ", ".join(
+            f"{law} {weights.get(law, 0.0):.2f}" for law in kept
+        )
+    return line
 
 
 def _report_id(folder: Path, targets: Sequence[float], loads_n: Sequence[float]) -> str:
