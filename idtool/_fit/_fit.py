@@ -211,7 +211,7 @@ def _start_point(model: BenchModel, u: np.ndarray) -> dict[str, float]:
             lo, hi = p.start_box
             start[p.name] = float(np.exp(np.log(lo) + u[j] * (np.log(hi) - np.log(lo))))
     names = [p.name for p in specs]
-    if "coupling_gain" not in names or specs[names.index("coupling_gain")].start_box is None:
+    if "coupling_gain" not in names or "coupling_gain" in _user_started(model):
         return start  # the gain fixed, or started where the user said
     j = names.index("coupling_gain")
     loads, alphas = np.asarray(d.normal_load_n), np.asarray(d.amplitude_fraction)
@@ -227,6 +227,11 @@ def _start_point(model: BenchModel, u: np.ndarray) -> dict[str, float]:
     spec = specs[j]
     start["coupling_gain"] = float(np.clip(amplitude / per_gain, 1.01 * spec.lo, 0.99 * spec.hi))
     return start
+
+
+def _user_started(model: BenchModel) -> set[str]:
+    """The parameters whose start (or fixed value) the user gave."""
+    return {s.name for s in model.settings if s.nominal is not None}
 
 
 def quasi_random(n: int, d: int, seed: int) -> np.ndarray:
@@ -300,7 +305,12 @@ def fit_model(
     # designs (nuisance misfit was ~60x the final loss there).
     points, ends = [], []
     # every physical parameter fixed or started by the user: one start is the fit
-    varied = [p for p in model.shared_params[:k] if p.start_box is not None]
+    varied = [
+        p
+        for p in model.shared_params[:k]
+        if p.start_box is not None
+        or (p.name == "coupling_gain" and p.name not in _user_started(model))
+    ]
     cube = quasi_random(n_starts, k, seed) if varied else np.zeros((1, k))
     for u in cube:
         start = _start_point(model, u)
