@@ -22,7 +22,7 @@ from idtool._model._settings import apply_settings
 from idtool._posterior._sample import _resolve
 
 # one actuator and offset model, noise only: what fixing changes is the point (CI time)
-FAST = {"actuator": "slope", "offset": "constant", "variability": False, "starts": 4}
+FAST = {"actuator": "slope", "offset": "constant", "variability": False}
 CHI2_1_999 = 10.83  # 99.9% quantile of chi-square with 1 degree of freedom
 
 
