@@ -3,6 +3,12 @@
 import os
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+# No on-disk compilation cache in tests (the CLI turns it on when ``main`` runs): twice
+# a fresh-clone run lost an xdist worker to a segfault inside JAX with the cache on
+# (reading an entry, b204230; compiling-and-writing one, this session's CI), never with
+# it off; and it did not save time here (42.6 against 42.0 CPU minutes). The cache's
+# own locking is tested in tests/test_validate_cli.py with an explicit folder.
+os.environ["IDTOOL_CACHE_DIR"] = ""
 
 import jax
 
