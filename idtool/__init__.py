@@ -31,6 +31,7 @@ _LAZY = {
     "Dataset": "idtool._data._dataset",
     "Rig": "idtool._data._dataset",
     "Trace": "idtool._data._dataset",
+    "TransducerSpec": "idtool._data._dataset",
     "load_dataset": "idtool._data._dataset",
     "example_dataset_path": "idtool._data._example",
     "example_params_path": "idtool._data._example",
@@ -58,6 +59,10 @@ _LAZY = {
     "ConstantCoupling": "idtool._model._coupling",
     "ExponentialCoupling": "idtool._model._coupling",
     "PowerLimitedCoupling": "idtool._model._coupling",
+    "SdofCoupling": "idtool._model._coupling",
+    "sdof_detuning_n_m": "idtool._model._coupling_sdof",
+    "sdof_loss_stiffness_n_m": "idtool._model._coupling_sdof",
+    "on_friction_ratio": "idtool._model._bench",
     "AbstractFrictionLaw": "idtool._model._laws",
     "Coulomb": "idtool._model._laws",
     "Dahl": "idtool._model._laws",
@@ -137,9 +142,11 @@ __all__ = [
     "Predictions",
     "Prior",
     "Rig",
+    "SdofCoupling",
     "SlopeActuator",
     "Trace",
     "Transducer",
+    "TransducerSpec",
     "TransducerSteadyState",
     "Validation",
     "__version__",
@@ -155,9 +162,12 @@ __all__ = [
     "load_bench_params",
     "load_dataset",
     "load_fit",
+    "on_friction_ratio",
     "plot_seed_study",
     "prescribed_cycle_average",
     "read_parameter_table",
+    "sdof_detuning_n_m",
+    "sdof_loss_stiffness_n_m",
     "seed_study",
     "simulate_bench",
     "simulate_transducer",
@@ -184,7 +194,7 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerly
-    from idtool._data._dataset import Dataset, Rig, Trace, load_dataset
+    from idtool._data._dataset import Dataset, Rig, Trace, TransducerSpec, load_dataset
     from idtool._data._example import example_dataset_path, example_params_path
     from idtool._data._import import import_daq
     from idtool._data._write import write_dataset
@@ -192,6 +202,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
     from idtool._fit._fit import Estimate
     from idtool._fit._parameter_table import read_parameter_table
     from idtool._model._actuator import ACTUATORS, AbstractActuator, LagActuator, SlopeActuator
+    from idtool._model._bench import on_friction_ratio
     from idtool._model._benchmodel import BenchModel, bench_model
     from idtool._model._contact import CycleAverage, cycle_average_curve, prescribed_cycle_average
     from idtool._model._coupling import (
@@ -200,7 +211,9 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
         ConstantCoupling,
         ExponentialCoupling,
         PowerLimitedCoupling,
+        SdofCoupling,
     )
+    from idtool._model._coupling_sdof import sdof_detuning_n_m, sdof_loss_stiffness_n_m
     from idtool._model._laws import FRICTION_LAWS, AbstractFrictionLaw, Coulomb, Dahl, LuGre
     from idtool._model._limits import coulomb_friction_ratio, dahl_small_lambda_friction_ratio
     from idtool._model._noise import NOISE_MODELS, AbstractNoise

@@ -62,7 +62,9 @@ def test_every_law_reduces_to_the_constant_one_where_it_says_it_nests():
     constant law's within 2e-4 for any load up to 1 kN: the nested start of
     fit_dataset lies in the constant law's basin, and the law can come as close to it
     as the data ask (a saturation 0.3% short of it at the bound cost the exponential
-    law 1 log-likelihood unit on constant-law data)."""
+    law 1 log-likelihood unit on constant-law data). The sdof law's ``amplitude_m`` is
+    its free amplitude: at its nested loss stiffness the friction's pull on the horn is
+    checked below instead."""
     alphas, loads = np.meshgrid(np.linspace(0.05, 1.0, 20), np.linspace(50.0, 1000.0, 20))
     reference = idtool.ConstantCoupling(gain=0.02).amplitude_m(alphas, loads, A_MAX)
     for name in COUPLINGS:
@@ -72,6 +74,12 @@ def test_every_law_reduces_to_the_constant_one_where_it_says_it_nests():
         law = COUPLINGS.get(name).from_values({k: jnp.asarray(v) for k, v in values.items()})
         ratio = np.asarray(law.amplitude_m(alphas, loads, A_MAX)) / np.asarray(reference)
         assert np.max(np.abs(ratio - 1.0)) <= 2e-4, name
+    # the sdof law's loaded amplitude there: Fc1 / R ~ 3e-12 m against ~1e-6 m
+    sdof = idtool.SdofCoupling(gain=0.02, loss_stiffness_n_m=5e13)
+    for load in (270.0, 1000.0):
+        contact = idtool.Dahl(fc_n=0.3 * load, kt_n_m=1e9)
+        loaded = sdof.slip_amplitude_m(contact, 0.5, load, 0.025, 2 * np.pi * 20e3, A_MAX)
+        assert float(loaded) == pytest.approx(0.5 * 0.02 * A_MAX, rel=2e-4)
 
 
 def _bench(law: str) -> idtool.BenchParams:
@@ -88,12 +96,14 @@ def _bench(law: str) -> idtool.BenchParams:
         "constant": {"law": "constant", "gain": 0.03 / math.sqrt(1.0 + x * x)},
         "power_limited": {"law": "power_limited", "gain": 0.03, "power_load_n": 300.0},
         "exponential": {"law": "exponential", "gain": 0.03, "saturation_load_n": 300.0},
+        # gain 0.03 (740 N over 85 um x R); the friction takes 20-60% of the amplitude
+        "sdof": {"law": "sdof", "drive_force_max_n": 740.0, "loss_stiffness_n_m": 2.9e8},
     }[law]
     return idtool.BenchParams.from_dict(copy.deepcopy(p))
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("truth", ["constant", "power_limited", "exponential"])
+@pytest.mark.parametrize("truth", ["constant", "power_limited", "exponential", "sdof"])
 def test_bic_picks_the_simulated_coupling_law(truth, tmp_path):
     dataset, _ = idtool.simulate_bench(_bench(truth), seed=1)
     with warnings.catch_warnings():
@@ -113,7 +123,7 @@ def test_bic_picks_the_simulated_coupling_law(truth, tmp_path):
     # 0.05: the load scales' bounds keep the laws 2e-4 off the constant one at most,
     # and each fit settles its own AR(1) coefficient (1e-3 here)
     constant = fit.run.candidates["dahl/constant/slope/constant"].loglik
-    for name in ("power-limited", "exponential"):
+    for name in ("power-limited", "exponential", "sdof"):
         assert fit.run.candidates[f"dahl/{name}/slope/constant"].loglik >= constant - 0.05
     if truth == "exponential":  # what fit.json and the report say
         fit.save(tmp_path / "fit", command=["fit"])

@@ -23,7 +23,8 @@ def steady_many(models, vrs, steps_per_period=256):
         vt = vr * p.linear_amplitude_m * p.angular_frequency_rad_s
         return idtool.transducer_steady_state(p, vt, steps_per_period=steps_per_period)
 
-    return jax.vmap(jax.vmap(one, (None, 0)), (0, None))(batch, vrs)
+    # one compiled program: op by op, each loop of the shooting compiles on its own
+    return jax.jit(jax.vmap(jax.vmap(one, (None, 0)), (0, None)))(batch, vrs)
 
 
 def test_table2_preset():
@@ -160,7 +161,7 @@ def _fr_of(params):
 
 def test_gradients_match_central_differences():
     x = jnp.array([0.056e6, 0.1, 1920.0])
-    grad = np.asarray(jax.grad(_fr_of)(x))
+    grad = np.asarray(jax.jit(jax.grad(_fr_of))(x))
     f = jax.jit(_fr_of)
     for i in range(3):
         h = 1e-5 * float(x[i])

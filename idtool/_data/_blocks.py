@@ -19,7 +19,7 @@ import dataclasses
 import equinox as eqx
 import numpy as np
 
-from idtool._data._dataset import Dataset
+from idtool._data._dataset import Dataset, TransducerSpec
 from idtool._errors import IdtoolError, Problem
 
 __all__ = [
@@ -90,6 +90,8 @@ class FitData(eqx.Module):
     op_load_n: np.ndarray
     op_alpha: np.ndarray
     op_speed_m_s: np.ndarray
+    # the rig's transducer block (for the sdof coupling law), None when not given
+    transducer: TransducerSpec | None = eqx.field(static=True, default=None)
 
     @property
     def n_traces(self) -> int:
@@ -313,6 +315,7 @@ def prepare_fit_data(
         mains_source=mains_source,
         residual_hum_fraction=layout.residual_hum_fraction,
         notes=tuple(n for n in [_layout_note(layout, mains_hz, periods_per_block)] if n),
+        transducer=dataset.rig.transducer,
     )
 
 

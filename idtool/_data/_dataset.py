@@ -25,20 +25,68 @@ from idtool._data._table_read import read_table
 from idtool._errors import IdtoolError, Problem
 from idtool._jsonio import parse_json
 
-__all__ = ["Dataset", "Rig", "Trace", "dataset_from_bytes", "dataset_sha256", "load_dataset"]
+__all__ = [
+    "Dataset",
+    "Rig",
+    "Trace",
+    "TransducerSpec",
+    "dataset_from_bytes",
+    "dataset_sha256",
+    "load_dataset",
+]
 
 Reader = Callable[[str, str], tuple[bytes | None, list[Problem]]]
+
+
+@dataclasses.dataclass(frozen=True)
+class TransducerSpec:
+    """The horn's transducer as a single-degree-of-freedom resonator (paper eq. 6), for
+    the ``sdof`` coupling law (:mod:`idtool._model._coupling_sdof`).
+
+    Attributes:
+        modal_mass_kg: modal mass m of the vibrating stack [kg].
+        natural_frequency_hz: its natural frequency fn = sqrt(Ks / m) / (2 pi) [Hz].
+        quality_factor: its mechanical Q (1 / (2 zeta)), or None: the fit identifies the
+            damping.
+    """
+
+    modal_mass_kg: float
+    natural_frequency_hz: float
+    quality_factor: float | None = None
+
+    @classmethod
+    def from_dict(cls, doc: Any) -> TransducerSpec | None:
+        """From ``rig.transducer`` (checked by the schema); None when left out."""
+        if doc is None:
+            return None
+        q = doc.get("quality_factor")
+        return cls(
+            modal_mass_kg=float(doc["modal_mass_kg"]),
+            natural_frequency_hz=float(doc["natural_frequency_hz"]),
+            quality_factor=None if q is None else float(q),
+        )
+
+    def to_dict(self) -> dict[str, float]:
+        out = {
+            "modal_mass_kg": self.modal_mass_kg,
+            "natural_frequency_hz": self.natural_frequency_hz,
+        }
+        if self.quality_factor is not None:
+            out["quality_factor"] = self.quality_factor
+        return out
 
 
 @dataclasses.dataclass(frozen=True)
 class Rig:
     """The bench: the ultrasonic horn's frequency [Hz] and amplitude at 100% command [m],
     and optionally the mains frequency [Hz] its load cell picks up as hum (None: not
-    given; the fit then looks for the hum in the traces, see :mod:`idtool._data._mains`)."""
+    given; the fit then looks for the hum in the traces, see :mod:`idtool._data._mains`),
+    and optionally the transducer's modal data (:class:`TransducerSpec`)."""
 
     vibration_frequency_hz: float
     max_amplitude_m: float
     mains_frequency_hz: float | None = None
+    transducer: TransducerSpec | None = None
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -267,6 +315,7 @@ def _assemble(json_bytes: bytes, read: Reader, root: Path | None, label: str) ->
             vibration_frequency_hz=float(document["rig"]["vibration_frequency_hz"]),
             max_amplitude_m=float(document["rig"]["max_amplitude_m"]),
             mains_frequency_hz=_optional_float(document["rig"].get("mains_frequency_hz")),
+            transducer=TransducerSpec.from_dict(document["rig"].get("transducer")),
         ),
         traces=tuple(traces),
         sha256=dataset_sha256(json_bytes, blobs),

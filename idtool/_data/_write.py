@@ -70,6 +70,8 @@ def document(
     }
     if rig.mains_frequency_hz is not None:
         out["rig"]["mains_frequency_hz"] = rig.mains_frequency_hz
+    if rig.transducer is not None:
+        out["rig"]["transducer"] = rig.transducer.to_dict()
     out["traces"] = entries
     for key, value in (extensions or {}).items():
         if not key.startswith("x_"):

@@ -75,7 +75,8 @@ class Estimate:
     std_error: float
     ci95: tuple[float, float]
     at_bound: bool = False
-    fixed: bool = False  # fixed by the user (--fix, a parameter table): not estimated
+    fixed: bool = False  # fixed (--fix, a parameter table, the rig): not estimated
+    fixed_label: str = ""  # who fixed it, for reports ("fixed by the user", ...)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -205,27 +206,28 @@ def _start_point(model: BenchModel, u: np.ndarray) -> dict[str, float]:
     """
     d = model.data
     specs = model.shared_params[: len(u)]
+    gain = model.coupling.gain_param
     start: dict[str, float] = {}
     for j, p in enumerate(specs):
-        if p.start_box is not None and p.name != "coupling_gain":
+        if p.start_box is not None and p.name != gain:
             lo, hi = p.start_box
             start[p.name] = float(np.exp(np.log(lo) + u[j] * (np.log(hi) - np.log(lo))))
     names = [p.name for p in specs]
-    if "coupling_gain" not in names or "coupling_gain" in _user_started(model):
+    if gain not in names or gain in _user_started(model):
         return start  # the gain fixed, or started where the user said
-    j = names.index("coupling_gain")
+    j = names.index(gain)
     loads, alphas = np.asarray(d.normal_load_n), np.asarray(d.amplitude_fraction)
     ref = np.lexsort((np.abs(loads - np.median(loads)), -alphas))[0]
     w = 2.0 * np.pi * float(d.vibration_frequency_hz)
     amplitude = float(d.pull_speed_m_s[ref]) / ((0.05 + 0.9 * u[j]) * w)
-    # The coupling with unit gain and its other parameters at their start values.
+    # The coupling with unit gain and its other parameters at their start values (the
+    # fixed ones at theirs); its friction-free amplitude is proportional to the gain.
     unit = model.coupling_of(
-        {p.name: jnp.asarray(start.get(p.name, p.start)) for p in specs}
-        | {"coupling_gain": jnp.asarray(1.0)}
+        {p.name: jnp.asarray(start.get(p.name, p.start)) for p in specs} | {gain: jnp.asarray(1.0)}
     )
     per_gain = float(unit.amplitude_m(alphas[ref], loads[ref], d.max_amplitude_m))
     spec = specs[j]
-    start["coupling_gain"] = float(np.clip(amplitude / per_gain, 1.01 * spec.lo, 0.99 * spec.hi))
+    start[gain] = float(np.clip(amplitude / per_gain, 1.01 * spec.lo, 0.99 * spec.hi))
     return start
 
 
@@ -309,7 +311,7 @@ def fit_model(
         p
         for p in model.shared_params[:k]
         if p.start_box is not None
-        or (p.name == "coupling_gain" and p.name not in _user_started(model))
+        or (p.name == model.coupling.gain_param and p.name not in _user_started(model))
     ]
     cube = quasi_random(n_starts, k, seed) if varied else np.zeros((1, k))
     for u in cube:
@@ -428,9 +430,12 @@ def _summarise(
                 f"{spec.name}: its 95% interval spans more than a factor of 100 "
                 f"({lo:.3g} to {hi:.3g} {spec.unit}); the data cannot inform it"
             )
-    for name, value in model.fixed.items():  # the user's values, reported as such
+    labels = {s.name: s.fixed_label for s in model.settings}
+    for name, value in model.fixed.items():  # the user's (or rig's) values, said so
         unit = next(p.unit for p in model.declared_params if p.name == name)
-        estimates[name] = Estimate(name, unit, value, 0.0, (value, value), fixed=True)
+        estimates[name] = Estimate(
+            name, unit, value, 0.0, (value, value), fixed=True, fixed_label=labels[name]
+        )
     k = model.n_physical
     for a in range(k):
         for b in range(a + 1, k):

@@ -97,6 +97,7 @@ class StoredFit:
                 (float(e["ci95"][0]), float(e["ci95"][1])),
                 bool(e.get("at_bound", False)),
                 bool(e.get("fixed", False)),
+                str(e.get("fixed_by", "fixed by the user" if e.get("fixed") else "")),
             )
             for name, e in entries.items()
         }

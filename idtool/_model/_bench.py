@@ -62,8 +62,10 @@ def on_friction_ratio(
 
     ``law`` must already carry ``Fc = mu N`` for this load (see :func:`dahl_at_load`).
     """
-    a = coupling.amplitude_m(amplitude_fraction, normal_load_n, max_amplitude_m)
     w = 2.0 * jnp.pi * jnp.asarray(vibration_frequency_hz)
+    a = coupling.slip_amplitude_m(
+        law, amplitude_fraction, normal_load_n, pull_speed_m_s, w, max_amplitude_m
+    )
     return prescribed_cycle_average(law, pull_speed_m_s, a, w).friction_ratio
 
 

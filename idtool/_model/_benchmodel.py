@@ -339,7 +339,10 @@ def bench_model(
     offset_cls = OFFSETS.get(offset)
     groups_of_trace = _trace_groups(offset_cls)
     s = start_values(data)
-    settings = tuple(settings)
+    # the rig's values for the coupling (a transducer's), unless the user set them
+    given = {x.name for x in settings}
+    rig = coupling_cls.rig_settings(float(data.vibration_frequency_hz), data.transducer)
+    settings = (*(x for x in rig if x.name not in given), *settings)
     shared = shared_params_of(law_cls, coupling_cls, actuator_cls, settings)
     guess = {
         "mu": s.friction_coefficient,

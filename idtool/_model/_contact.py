@@ -48,6 +48,11 @@ class CycleAverage(eqx.Module):
         off_friction_n: friction force in steady sliding at v without vibration [N].
         mean_power_w: mean friction power ON [W].
         off_power_w: friction power OFF, ``off_friction_n * v`` [W].
+        harmonic_cos_n, harmonic_sin_n: first Fourier coefficients of the friction force
+            against the phase, ``F ~ F0 + Fc1 cos(theta) + Fs1 sin(theta)`` [N]
+            (``Fc1 = (1/pi) int F cos(theta) dtheta``): the force the contact returns on
+            the vibrating body at its own frequency, which loads the transducer in
+            :mod:`idtool._model._coupling_sdof` (``Fs1`` elastic, ``Fc1`` dissipative).
     """
 
     velocity_ratio: Float[Array, "*b"]
@@ -58,6 +63,8 @@ class CycleAverage(eqx.Module):
     off_friction_n: Float[Array, "*b"]
     mean_power_w: Float[Array, "*b"]
     off_power_w: Float[Array, "*b"]
+    harmonic_cos_n: Float[Array, "*b"]
+    harmonic_sin_n: Float[Array, "*b"]
 
 
 def _phi1(kappa: Array) -> Array:
@@ -166,6 +173,20 @@ def prescribed_cycle_average(
     s1_power = s1 * jnp.sum(v_mid**2 * zdot_factor * dtheta) / _TWO_PI
     s2_power = s2 * (v**2 + 0.5 * (a * w) ** 2)
 
+    # First harmonic: the step mean (over the slip, its phase mean to second order) times
+    # the exact integral of cos / sin over the step; s1 dz/dt at the step midpoint.
+    th1 = th0 + dtheta
+    s1_force = s1 * v_mid * zdot_factor
+    harmonic_cos = (
+        jnp.sum(step_mean * (jnp.sin(th1) - jnp.sin(th0)) + s1_force * jnp.cos(mid) * dtheta)
+        / jnp.pi
+        + s2 * a * w
+    )
+    harmonic_sin = (
+        jnp.sum(step_mean * (jnp.cos(th0) - jnp.cos(th1)) + s1_force * jnp.sin(mid) * dtheta)
+        / jnp.pi
+    )
+
     mean_force = mean_fb + s2 * v  # mean of s1 dz/dt over a period is zero
     mean_power = fb_power + s1_power + s2_power
     off_force = law.off_force_n(v)
@@ -179,6 +200,8 @@ def prescribed_cycle_average(
         off_friction_n=off_force,
         mean_power_w=mean_power,
         off_power_w=off_power,
+        harmonic_cos_n=harmonic_cos,
+        harmonic_sin_n=harmonic_sin,
     )
 
 

@@ -10,7 +10,10 @@ that registers itself:
 * ``power-limited`` (:mod:`idtool._model._coupling_power_limited`):
   ``a = gain * alpha * A_max / sqrt(1 + (alpha N / P)^2)``;
 * ``exponential`` (:mod:`idtool._model._coupling_exponential`):
-  ``a = gain * A_max * (P / N) * (1 - exp(-alpha N / P))``.
+  ``a = gain * A_max * (P / N) * (1 - exp(-alpha N / P))``;
+* ``sdof`` (:mod:`idtool._model._coupling_sdof`): the seed's transducer (paper eqs. 6-7)
+  driven by ``alpha Fe_max`` and loaded by the contact's friction, solved by harmonic
+  balance: the amplitude follows from the physics, not from a fitted shape.
 
 The two saturating laws are the constant one at small ``alpha N`` and saturate at
 ``gain * A_max * P / N`` at large ``alpha N`` (the welder's power limits the effect;
@@ -29,7 +32,10 @@ from typing import ClassVar
 import equinox as eqx
 from jaxtyping import Array, ArrayLike, Float
 
+from idtool._data._dataset import TransducerSpec
+from idtool._model._laws import AbstractFrictionLaw
 from idtool._model._params import Param
+from idtool._model._settings import ParameterSetting
 from idtool._registry import Registry
 
 __all__ = [
@@ -39,6 +45,7 @@ __all__ = [
     "ConstantCoupling",
     "ExponentialCoupling",
     "PowerLimitedCoupling",
+    "SdofCoupling",
     "load_scale_param",
 ]
 
@@ -59,15 +66,32 @@ GAIN: Param = Param(
 class AbstractCoupling(eqx.Module):
     """Maps an operating point to the effective slip amplitude [m].
 
-    Every law has a dimensionless ``gain`` that the amplitude is proportional to (the
-    fit places its start through a velocity ratio below 1, see
-    :func:`idtool._fit._starts.start_point`) and declares its parameters in
-    ``fit_params``, ``coupling_gain`` first.
+    Every law declares its parameters in ``fit_params``; the one named by ``gain_param``
+    (``coupling_gain`` unless the law says otherwise) scales the friction-free amplitude
+    :meth:`amplitude_m` in proportion, which is how the fit places its start (through a
+    velocity ratio below 1, see :func:`idtool._fit._fit._start_point`). A law in which
+    the contact reacts on the vibration (``sdof``) also overrides
+    :meth:`slip_amplitude_m`.
     """
 
-    gain: eqx.AbstractVar[Float[ArrayLike, ""]]
     name: ClassVar[str] = ""
     fit_params: ClassVar[tuple[Param, ...]] = (GAIN,)
+    gain_param: ClassVar[str] = "coupling_gain"
+
+    def derived(self, max_amplitude_m: Float[ArrayLike, ""]) -> dict[str, tuple[Array, str, str]]:
+        """Quantities that follow from the parameters, reported with them: name ->
+        (value, unit, what it is). None for the kinematic laws."""
+        del max_amplitude_m
+        return {}
+
+    @classmethod
+    def rig_settings(
+        cls, vibration_frequency_hz: float, transducer: TransducerSpec | None
+    ) -> tuple[ParameterSetting, ...]:
+        """The parameters the rig's data fix for this law (the user's settings win):
+        none, unless the law models the transducer."""
+        del vibration_frequency_hz, transducer
+        return ()
 
     @classmethod
     @abc.abstractmethod
@@ -81,7 +105,23 @@ class AbstractCoupling(eqx.Module):
         normal_load_n: Float[ArrayLike, "*b"],
         max_amplitude_m: Float[ArrayLike, ""],
     ) -> Float[Array, "*b"]:
-        """Effective slip amplitude [m] seen by the contact model."""
+        """Effective slip amplitude [m] seen by the contact model, before the contact
+        reacts on the vibration (for a kinematic law, the amplitude itself)."""
+
+    def slip_amplitude_m(
+        self,
+        law: AbstractFrictionLaw,
+        amplitude_fraction: Float[ArrayLike, ""],
+        normal_load_n: Float[ArrayLike, ""],
+        sliding_speed_m_s: Float[ArrayLike, ""],
+        angular_frequency_rad_s: Float[ArrayLike, ""],
+        max_amplitude_m: Float[ArrayLike, ""],
+    ) -> Float[Array, ""]:
+        """The slip amplitude [m] at one operating point with the contact ``law`` (its
+        ``Fc = mu N`` for this load) in place: :meth:`amplitude_m` unless the law models
+        the contact's reaction."""
+        del law, sliding_speed_m_s, angular_frequency_rad_s
+        return self.amplitude_m(amplitude_fraction, normal_load_n, max_amplitude_m)
 
 
 def load_scale_param(name: str, description: str, hi: float = 1e5) -> Param:
@@ -110,3 +150,4 @@ def load_scale_param(name: str, description: str, hi: float = 1e5) -> Param:
 from idtool._model._coupling_constant import ConstantCoupling  # noqa: E402
 from idtool._model._coupling_exponential import ExponentialCoupling  # noqa: E402
 from idtool._model._coupling_power_limited import PowerLimitedCoupling  # noqa: E402
+from idtool._model._coupling_sdof import SdofCoupling  # noqa: E402

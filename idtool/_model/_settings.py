@@ -59,6 +59,13 @@ class ParameterSetting:
             if x is not None and not math.isfinite(x):
                 raise ValueError(f"{self.name}: {label} value {x} is not a finite number")
 
+    @property
+    def fixed_label(self) -> str:
+        """How reports say who fixed it: the rig's data, an assumption, or the user."""
+        if self.source.startswith(("rig.", "assumed")):
+            return f"fixed: {self.source}"
+        return "fixed by the user"
+
     def apply(self, p: Param) -> Param:
         """``p`` with this setting's range, transform and start (``p`` estimated).
 

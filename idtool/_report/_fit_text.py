@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from idtool._fit._derived import derived_estimates
 from idtool._fit._fit import Estimate, FitResult
 from idtool._fit._run import FitRun
 from idtool._fit._store import law_state_file
@@ -29,7 +30,7 @@ def _est(e: Estimate) -> dict:
         "unit": e.unit,
         "at_bound": bool(e.at_bound),
     }
-    return out | {"fixed": True} if e.fixed else out
+    return out | {"fixed": True, "fixed_by": e.fixed_label} if e.fixed else out
 
 
 def _fixed_physical(r: FitResult) -> list[str]:
@@ -81,6 +82,11 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
     law, coupling = r.model.law.name, r.model.coupling.name
     return {
         "parameters": params,
+        # quantities that follow from the parameters (the sdof law's drive force)
+        "derived": {
+            name: _est(e) | {"description": what}
+            for name, (e, what) in derived_estimates(r).items()
+        },
         "bench": {
             name: _est(r.estimates[name])
             for name in [*shared, *r.model.fixed]
@@ -200,7 +206,7 @@ def _variability_lines(r: FitResult) -> list[str]:
 
 def _fmt(e: Estimate) -> str:
     if e.fixed:
-        return f"{e.estimate:12.5g} {e.unit:4s} fixed by the user (not estimated)"
+        return f"{e.estimate:12.5g} {e.unit:4s} {e.fixed_label or 'fixed'} (not estimated)"
     rel = f"({100 * e.std_error / abs(e.estimate):.2g}%)" if e.estimate else ""
     flag = "  AT BOUND" if e.at_bound else ""
     return (
@@ -231,6 +237,9 @@ def fit_report(run: FitRun) -> str:
         if name in run.profiles:
             lo, hi = run.profiles[name].ci95
             lines.append(f"    {'':22s}profile likelihood 95%: [{lo:.5g}, {hi:.5g}]")
+    for name, (e, what) in derived_estimates(r).items():
+        lines.append(f"    {name:22s}{_fmt(e)}")
+        lines.append(f"    {'':22s}(derived: {what})")
     lines += _variability_lines(r)
     lines.append("[[Bench parameters]]")
     shared = _shared_names(r)

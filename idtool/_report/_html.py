@@ -300,7 +300,7 @@ def write_report(
             row = [n, meaning.get(n, ""), p["unit"], g(p["estimate"])]
             row += [f"[{g(p['ci95'][0])}, {g(p['ci95'][1])}]"]
             if n in fixed:
-                row[-1:] = ["fixed by the user", "-", "fixed (not sampled)"]
+                row[-1:] = [p.get("fixed_by", "fixed by the user"), "-", "fixed (not sampled)"]
             elif post is not None and n in post:
                 v = np.asarray(post[n].values).ravel()
                 lo, med, hi = np.percentile(v, [2.5, 50, 97.5])
@@ -308,6 +308,11 @@ def write_report(
             else:
                 row += ["-", "no posterior: run idtool sample"]
             rows.append(row)
+        for n, p in doc.get("derived", {}).items():  # e.g. the sdof law's drive force
+            ci = f"[{g(p['ci95'][0])}, {g(p['ci95'][1])}]"
+            rows.append(
+                [n, p["description"], p["unit"], g(p["estimate"]), ci, "-", "derived from the fit"]
+            )
         sec["Estimates"] = table(
             ["parameter", "meaning", "unit", "fit", "fit 95%", "posterior median", "posterior 95%"],
             rows,

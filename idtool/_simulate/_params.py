@@ -17,11 +17,11 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from idtool._data._dataset import Rig
+from idtool._data._dataset import Rig, TransducerSpec
 from idtool._data._schema import SIMULATOR_PARAMS_SCHEMA, schema_problems
 from idtool._errors import IdtoolError
 from idtool._jsonio import parse_json
-from idtool._model._coupling import COUPLINGS, AbstractCoupling
+from idtool._model._coupling import COUPLINGS, AbstractCoupling, SdofCoupling
 from idtool._simulate._truth_coupling import TRUTH_ONLY_COUPLINGS
 
 __all__ = [
@@ -56,29 +56,47 @@ class CouplingParams:
     ``law`` is 'constant', 'power_limited' (load scale ``power_load_n`` P [N]),
     'exponential' (load scale ``saturation_load_n`` P [N]) or the truth-only
     'load_exponential' (load scale ``load_scale_n`` [N]; see
-    :mod:`idtool._simulate._truth_coupling`).
+    :mod:`idtool._simulate._truth_coupling`), or 'sdof', the transducer loaded by the
+    contact (``drive_force_max_n`` [N], ``loss_stiffness_n_m`` [N/m], ``detuning_n_m``
+    [N/m], default 0; see :mod:`idtool._model._coupling_sdof`), which has no ``gain``.
     """
 
     law: str
-    gain: float
+    gain: float | None = None
     power_load_n: float | None = None
     load_scale_n: float | None = None
     saturation_load_n: float | None = None
+    drive_force_max_n: float | None = None
+    loss_stiffness_n_m: float | None = None
+    detuning_n_m: float | None = None
 
     @property
     def in_fit(self) -> bool:
         """Whether the fit ships this law (else the simulation is deliberately misspecified)."""
         return self.law not in TRUTH_ONLY_COUPLINGS
 
-    def model(self) -> AbstractCoupling:
+    def model(self, max_amplitude_m: float) -> AbstractCoupling:
         """The coupling law of this name: the registry's (``power_limited`` in the file is
-        the registry's ``power-limited``), or a truth-only law of the simulator."""
+        the registry's ``power-limited``), or a truth-only law of the simulator;
+        ``max_amplitude_m`` [m], the rig's horn amplitude at 100% (the sdof law's gain is
+        its drive over it)."""
         values: dict[str, Any] = {
             "coupling_gain": self.gain,
             "power_load_n": self.power_load_n,
             "load_scale_n": self.load_scale_n,
             "saturation_load_n": self.saturation_load_n,
+            "drive_force_max_n": self.drive_force_max_n,
+            "loss_stiffness_n_m": self.loss_stiffness_n_m,
+            "detuning_n_m": 0.0 if self.detuning_n_m is None else self.detuning_n_m,
         }
+        if self.law == "sdof":  # the file gives the drive; the law, its gain
+            assert self.drive_force_max_n is not None and self.loss_stiffness_n_m is not None
+            return SdofCoupling.from_drive(
+                self.drive_force_max_n,
+                self.loss_stiffness_n_m,
+                values["detuning_n_m"],
+                max_amplitude_m,
+            )
         if self.law in TRUTH_ONLY_COUPLINGS:
             return TRUTH_ONLY_COUPLINGS[self.law].from_values(values)
         return COUPLINGS.get(self.law.replace("_", "-")).from_values(values)
@@ -197,7 +215,16 @@ class BenchParams:
             material=d["material"],
             # Every rig field the dataset schema knows (its optional ones included), so a
             # field the file gives reaches dataset.json and to_dict; 'x_' ones are ignored.
-            rig=Rig(**_floats({k: v for k, v in d["rig"].items() if not k.startswith("x_")})),
+            rig=Rig(
+                **_floats(
+                    {
+                        k: v
+                        for k, v in d["rig"].items()
+                        if not k.startswith("x_") and k != "transducer"
+                    }
+                ),
+                transducer=TransducerSpec.from_dict(d["rig"].get("transducer")),
+            ),
             contact=ContactParams(
                 friction_law=d["contact"]["friction_law"],
                 friction_coefficient=float(d["contact"]["friction_coefficient"]),
@@ -205,10 +232,7 @@ class BenchParams:
             ),
             coupling=CouplingParams(
                 law=d["coupling"]["law"],
-                gain=float(d["coupling"]["gain"]),
-                power_load_n=_optional_float(d["coupling"].get("power_load_n")),
-                load_scale_n=_optional_float(d["coupling"].get("load_scale_n")),
-                saturation_load_n=_optional_float(d["coupling"].get("saturation_load_n")),
+                **{k: float(v) for k, v in d["coupling"].items() if k != "law"},
             ),
             actuator=_actuator(d["actuator"]),
             horn_switching=SwitchingParams(**_floats(d["horn_switching"])),
@@ -232,7 +256,7 @@ class BenchParams:
                 continue
             if dataclasses.is_dataclass(value) and not isinstance(value, type):
                 value = {
-                    f.name: list(v) if isinstance(v, tuple) else v
+                    f.name: list(v) if isinstance(v, tuple) else _plain(v)
                     for f in dataclasses.fields(value)
                     if (v := getattr(value, f.name)) is not None and not _is_default(f, v)
                 }
@@ -245,6 +269,11 @@ def _is_default(field: dataclasses.Field[Any], value: Any) -> bool:
     if field.default is not dataclasses.MISSING and field.default is not None:
         return bool(value == field.default)
     return False
+
+
+def _plain(value: Any) -> Any:
+    """A nested record (the rig's transducer) as its JSON object."""
+    return value.to_dict() if hasattr(value, "to_dict") else value
 
 
 def _optional_float(value: Any) -> float | None:
