@@ -380,10 +380,10 @@ def _spike_and_slab(grid: np.ndarray, likelihood: np.ndarray) -> np.ndarray:
     return w / w.sum()
 
 
-def _line_search(model, z, phi, y, rows, c, theta, step, r, g):
+def _line_search(model, z, phi, y, rows, c, theta, step, r):
     """``theta`` moved along the Gauss-Newton ``step``, halved until the generalised
     residual sum of squares ``r' C^-1 r`` does not rise (at most 30 halvings: then no
-    move); the step taken and the Jacobian where it lands. Where the levels barely
+    move), and the step taken. Where the levels barely
     inform a direction (the sdof law's Kt, gain and R on two amplitudes) the full step
     ran into a bound, where the Jacobian loses its column and the covariance is
     singular; on a well-posed fit the full step is taken, as before."""
@@ -395,11 +395,12 @@ def _line_search(model, z, phi, y, rows, c, theta, step, r, g):
     before = gls(r)
     for _ in range(31):
         trial = theta + step
-        g_all, jac_all = _model_log_levels(model, np.concatenate([trial, z[k:]]), phi)
+        with np.errstate(divide="ignore", invalid="ignore"):  # a level at zero: rejected
+            g_all, _ = _model_log_levels(model, np.concatenate([trial, z[k:]]), phi)
         if np.all(np.isfinite(g_all)) and gls(y - g_all[rows]) <= before * (1.0 + 1e-12):
-            return trial, step, jac_all[rows]
+            return trial, step
         step = 0.5 * step
-    return theta, np.zeros_like(step), g
+    return theta, np.zeros_like(step)
 
 
 def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variability:
@@ -423,7 +424,7 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
         tau2 = mask * np.exp(2.0 * s)
         _, step = _at(tau2, r, g, args)
         c = np.asarray(_covariance(tau2, *args))
-        theta, step, g = _line_search(model, z, phi, free.y, rows, c, theta, step, r, g)
+        theta, step = _line_search(model, z, phi, free.y, rows, c, theta, step, r)
         cov = np.linalg.inv(g.T @ np.linalg.solve(c, g))
         if not np.all(np.diag(cov) > 0.0):
             raise np.linalg.LinAlgError("they do not inform every physical parameter")
