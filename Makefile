@@ -22,7 +22,7 @@ lint: $(STAMP)
 	$(BIN)/mypy
 
 test: lint
-	MPLBACKEND=Agg $(BIN)/python -m pytest -n 2 --dist loadfile
+	MPLBACKEND=Agg $(BIN)/python -m pytest -n 2 --dist loadfile --durations=30
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_curve.py

@@ -287,3 +287,23 @@ def test_posterior_and_extrapolation(fits, tmp_path):
     amplitudes = page.split("<h2>Amplitude needed")[1].split("</section>")[0]
     assert amplitudes.count("<td>40%</td>") == 2  # one target, at the two loads
     assert "<td>1000 (extrapolated)</td>" in amplitudes and "<td>670</td>" in amplitudes
+
+
+@pytest.mark.slow
+def test_an_sdof_fit_compares_and_says_who_fixed_what(fits, tmp_path):
+    """B fitted with the sdof law (no rig.transducer: the detuning is an assumption,
+    not the user's choice) compares against A; its estimates row says so, and the
+    inverse prediction runs through the loaded horn."""
+    data = idtool.load_fit(fits["B"]).dataset
+    fit = idtool.fit(data, coupling="sdof", actuator="slope", offset="constant", seed=0)
+    sdof = tmp_path / "Bsdof"
+    fit.save(sdof)
+    out = tmp_path / "cmp"
+    assert main(["compare", str(fits["A"]), str(sdof), "--out", str(out), "-q"]) == 0
+    doc = _doc(out)
+    detuning = doc["estimates"]["Bsdof"]["detuning_n_m"]
+    assert detuning["source"] == "fixed" and detuning["estimate"] == 0.0
+    assert detuning["fixed_by"].startswith("fixed: assumed: no rig.transducer")
+    page = (out / "compare.html").read_text()
+    assert "(fixed: assumed: no rig.transducer" in page and "fixed by the user" not in page
+    assert len(doc["amplitudes"]["Bsdof"]) == 4  # targets 30, 50 x the loads

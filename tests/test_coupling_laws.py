@@ -57,6 +57,35 @@ def test_the_amplitude_grows_with_the_command_and_falls_with_the_load():
         assert np.all(np.diff(amp) <= 0.0), name
 
 
+@pytest.mark.parametrize("detuning_n_m", [0.0, 1.5e8])
+def test_drive_fraction_inverts_the_slip_amplitude(detuning_n_m):
+    """``drive_fraction`` (the inverse prediction's map from slip amplitude back to the
+    command) undoes ``slip_amplitude_m`` for every registered law: the kinematic ones
+    through the default bisection (2^-52), the sdof one in closed form from the
+    harmonics at the loaded amplitude, which its solve balances to ~1e-10 in log force
+    (tests/test_coupling_sdof.py), hence 1e-9 here; detuned as well."""
+    w, speed = 2 * np.pi * 20e3, 0.025
+
+    @jax.jit
+    def round_trip(coupling, law, alpha, load):
+        a = coupling.slip_amplitude_m(law, alpha, load, speed, w, A_MAX)
+        cycle = idtool.prescribed_cycle_average(law, speed, a, w)
+        return coupling.drive_fraction(law, a, cycle, load, w, A_MAX)
+
+    for name in COUPLINGS:
+        values = {p.name: p.start for p in COUPLINGS.get(name).fit_params}
+        values |= {"coupling_gain": 0.03, "loss_stiffness_n_m": 2.9e8}
+        values |= {"detuning_n_m": detuning_n_m}
+        values |= {"power_load_n": 300.0, "saturation_load_n": 300.0}
+        cls = COUPLINGS.get(name)
+        coupling = cls.from_values({p.name: jnp.asarray(values[p.name]) for p in cls.fit_params})
+        for load in (100.0, 450.0, 900.0):
+            law = idtool.Dahl(fc_n=0.3 * load, kt_n_m=1e9)
+            for alpha in (0.05, 0.3, 0.7, 1.0):
+                back = float(round_trip(coupling, law, jnp.asarray(alpha), jnp.asarray(load)))
+                assert back == pytest.approx(alpha, rel=1e-9, abs=1e-12), (name, load, alpha)
+
+
 def test_every_law_reduces_to_the_constant_one_where_it_says_it_nests():
     """Where a law's parameters sit at their ``nested_at`` values, its amplitude is the
     constant law's within 2e-4 for any load up to 1 kN: the nested start of

@@ -12,11 +12,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from scipy.optimize import brentq
 
 import idtool
 from idtool import SdofCoupling
 from idtool._data._blocks import prepare_fit_data
 from idtool._model._benchmodel import bench_model
+from idtool._simulate._simulate import true_friction_ratio
 
 W = 2.0 * np.pi * 20e3  # the bench's horn [rad/s]
 SPEED = 0.025  # pull speed [m/s]
@@ -272,9 +274,47 @@ def test_the_fit_recovers_its_own_truth(tmp_path):
         )
         se = (p.ci95[1] - p.ci95[0]) / (2 * 1.96)
         assert abs(p.median - point.friction_ratio) < 3.0 * se + 1e-4, point
+    # the inverse (a search on the slip amplitude, mapped back to the command in closed
+    # form) against the forward prediction, and the truth's own amplitude for 30%
+    (need,) = fit.amplitude_for(30.0, [450.0], max_draws=500)
+    med, lo, hi = need.amplitude
+    (p,) = fit.predict([450.0], [med], max_draws=500)
+    assert p.median == pytest.approx(0.7, abs=2e-3)
+    true_alpha = brentq(lambda x: true_friction_ratio(bench, 450.0, x) - 0.7, 0.05, 1.0)
+    assert lo <= true_alpha <= hi, (true_alpha, need.amplitude)
     assert e["detuning_n_m"].fixed
     assert "assumed" in e["detuning_n_m"].fixed_label
     doc = json.loads((tmp_path / "fit" / "fit.json").read_text())
     assert doc["parameters"]["detuning_n_m"]["fixed"] is True
     assert "resonance" in doc["parameters"]["detuning_n_m"]["fixed_by"]
     assert "horn is taken as driven at its resonance" in fit.report()
+    # the detuning's profile (no rig.transducer): the truth, resonance, inside it
+    lo, hi = doc["parameters"]["detuning_n_m"]["profile_ci95"]
+    assert lo < 0.0 < hi
+    (note,) = [n for n in fit.notes if "detuning" in n]
+    assert "inside it" in note or "cannot tell" in note
+
+
+@pytest.mark.slow
+def test_the_detuning_profile_finds_a_detuned_horn():
+    """Traces of a horn driven 45 degrees off resonance (D = R), fitted with the
+    resonance assumed (no rig.transducer): the fit at D = 0 runs to the constant law's
+    limit (R at its bound, where D no longer matters), yet the profile, started also
+    where the friction loads the horn, puts its best point at the grid's nearest to the
+    truth (3e8 N/m against 2.9e8) and warns, by hundreds of -2 log L units."""
+    p = json.loads(idtool.example_params_path().read_text())
+    p["coupling"] = {
+        "law": "sdof",
+        "drive_force_max_n": DRIVE_N,
+        "loss_stiffness_n_m": LOSS_N_M,
+        "detuning_n_m": LOSS_N_M,
+    }
+    dataset, _ = idtool.simulate_bench(idtool.BenchParams.from_dict(p), seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit = idtool.fit(dataset, coupling="sdof", actuator="slope", offset="constant")
+    (warning,) = [w for w in fit.warnings if "detuning" in w]
+    assert "argue against a horn driven at resonance" in warning
+    assert "(D = 3e+08 N/m)" in warning
+    rise = float(warning.split("profile rises ")[1].split(" ")[0])
+    assert rise > 100.0

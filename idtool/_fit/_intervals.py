@@ -20,7 +20,13 @@ import numpy as np
 
 from idtool._fit._fit import Z95, Z_AT_BOUND, FitResult, run_lm
 
-__all__ = ["check_intervals", "refit_with_fixed"]
+__all__ = [
+    "Profile",
+    "check_intervals",
+    "profile_interval",
+    "profile_parameter",
+    "refit_with_fixed",
+]
 
 _CHI2_95 = 3.84  # -2 log L rise at the ends of a 95% interval, one parameter
 _TOO_FLAT = 1.0  # a rise below this at an end means the interval is far too narrow
@@ -89,3 +95,52 @@ def check_intervals(result: FitResult) -> FitResult:
             f"interval [{lo:.4g}, {hi:.4g}] is reported instead. The data barely inform it"
         )
     return dataclasses.replace(result, estimates=estimates, warnings=warnings)
+
+
+@dataclasses.dataclass(frozen=True)
+class Profile:
+    """Profile likelihood of one parameter: values, -2 log L rise, 95% interval."""
+
+    name: str
+    values: np.ndarray
+    delta: np.ndarray
+    ci95: tuple[float, float]
+
+
+def profile_parameter(result: FitResult, name: str, n_points: int = 9) -> Profile:
+    """Profile likelihood: fix ``name`` on a grid, refit all the others (same AR(1)).
+
+    The grid spans +-3 standard errors on the internal scale; the 95% interval is where
+    the rise of -2 log L (``(RSS - RSS_min) / sigma^2``) stays below 3.84.
+    """
+    model = result.model
+    i = model.names.index(name)
+    se = float(np.sqrt(result.cov_z[i, i]))
+    grid = result.z[i] + se * np.linspace(-3.0, 3.0, n_points)
+    delta = np.empty(n_points)
+    mid = n_points // 2
+    # Walk outward from the optimum in both directions, each refit starting from its
+    # neighbour's solution: a handful of LM steps per point instead of a cold start.
+    for order in (range(mid, n_points), range(mid, -1, -1)):
+        z = None
+        for j in order:
+            delta[j], z = refit_with_fixed(result, i, grid[j], z)
+    values = [float(model.params[i].value(jnp.asarray(zi))) for zi in grid]
+    v, d = np.array(values), delta
+    return Profile(name, v, d, profile_interval(v, d))
+
+
+def profile_interval(v: np.ndarray, d: np.ndarray, level: float = 3.84) -> tuple[float, float]:
+    """Where the profile crosses ``level`` on each side of its minimum (linear
+    interpolation); the grid's end if it never does (the interval is then open)."""
+    m = int(np.argmin(d))
+    lo, hi = float(v[0]), float(v[-1])
+    for j in range(m, 0, -1):
+        if d[j - 1] >= level:
+            lo = float(np.interp(level, [d[j], d[j - 1]], [v[j], v[j - 1]]))
+            break
+    for j in range(m, v.size - 1):
+        if d[j + 1] >= level:
+            hi = float(np.interp(level, [d[j], d[j + 1]], [v[j], v[j + 1]]))
+            break
+    return lo, hi

@@ -20,15 +20,20 @@ import dataclasses
 import time
 from collections.abc import Callable, Sequence
 
-import jax.numpy as jnp
 import numpy as np
 
 from idtool._data._blocks import FitData, prepare_fit_data
 from idtool._data._dataset import Dataset
 from idtool._data._mains import resolve_mains
 from idtool._errors import IdtoolError
+from idtool._fit._detuning import (
+    DETUNING,
+    detuning_assumed,
+    detuning_profile,
+    detuning_sentence,
+)
 from idtool._fit._fit import FitResult, fit_model
-from idtool._fit._intervals import check_intervals, refit_with_fixed
+from idtool._fit._intervals import Profile, check_intervals, profile_parameter
 from idtool._fit._variability import with_variability
 from idtool._model._actuator import ACTUATORS
 from idtool._model._benchmodel import shared_params_of
@@ -42,22 +47,10 @@ from idtool._model._settings import ParameterSetting
 __all__ = [
     "FitRun",
     "LawWeight",
-    "Profile",
     "check_settings",
     "coupling_weights",
     "fit_dataset",
-    "profile_parameter",
 ]
-
-
-@dataclasses.dataclass(frozen=True)
-class Profile:
-    """Profile likelihood of one parameter: values, -2 log L rise, 95% interval."""
-
-    name: str
-    values: np.ndarray
-    delta: np.ndarray
-    ci95: tuple[float, float]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -232,6 +225,16 @@ def fit_dataset(
     best_key, best = ranked[0]
     say(f"checking the intervals of {best_key}")
     best = candidates[best_key] = check_intervals(best)
+    profiles = {}
+    if detuning_assumed(best):  # sdof without rig.transducer: can the data tell D?
+        say(f"profiling the transducer's detuning of {best_key}")
+        profiles[DETUNING] = prof = detuning_profile(best)
+        sentence, warn = detuning_sentence(prof)
+        if warn:
+            best = dataclasses.replace(best, warnings=[*best.warnings, sentence])
+        else:
+            best = dataclasses.replace(best, notes=[*best.notes, sentence])
+        candidates[best_key] = best
     if variability:  # pull-to-pull scatter and model discrepancy (issue 10)
         say("estimating the pull-to-pull scatter and the model discrepancy")
         best = candidates[best_key] = with_variability(best)
@@ -270,7 +273,6 @@ def fit_dataset(
             "; all traces share one normal load, so the power-limited coupling cannot be "
             "told apart from the constant one: the simpler is kept"
         )
-    profiles = {}
     if profile:
         for name in best.model.physical_names:
             profiles[name] = profile_parameter(best, name)
@@ -314,42 +316,3 @@ def check_settings(
     if problems:
         raise IdtoolError("parameter settings:\n  " + "\n  ".join(problems))
     return settings
-
-
-def profile_parameter(result: FitResult, name: str, n_points: int = 9) -> Profile:
-    """Profile likelihood: fix ``name`` on a grid, refit all the others (same AR(1)).
-
-    The grid spans +-3 standard errors on the internal scale; the 95% interval is where
-    the rise of -2 log L (``(RSS - RSS_min) / sigma^2``) stays below 3.84.
-    """
-    model = result.model
-    i = model.names.index(name)
-    se = float(np.sqrt(result.cov_z[i, i]))
-    grid = result.z[i] + se * np.linspace(-3.0, 3.0, n_points)
-    delta = np.empty(n_points)
-    mid = n_points // 2
-    # Walk outward from the optimum in both directions, each refit starting from its
-    # neighbour's solution: a handful of LM steps per point instead of a cold start.
-    for order in (range(mid, n_points), range(mid, -1, -1)):
-        z = None
-        for j in order:
-            delta[j], z = refit_with_fixed(result, i, grid[j], z)
-    values = [float(model.params[i].value(jnp.asarray(zi))) for zi in grid]
-    v, d = np.array(values), delta
-    return Profile(name, v, d, _interval(v, d))
-
-
-def _interval(v: np.ndarray, d: np.ndarray, level: float = 3.84) -> tuple[float, float]:
-    """Where the profile crosses ``level`` on each side of its minimum (linear
-    interpolation); the grid's end if it never does (the interval is then open)."""
-    m = int(np.argmin(d))
-    lo, hi = float(v[0]), float(v[-1])
-    for j in range(m, 0, -1):
-        if d[j - 1] >= level:
-            lo = float(np.interp(level, [d[j], d[j - 1]], [v[j], v[j - 1]]))
-            break
-    for j in range(m, v.size - 1):
-        if d[j + 1] >= level:
-            hi = float(np.interp(level, [d[j], d[j + 1]], [v[j], v[j + 1]]))
-            break
-    return lo, hi

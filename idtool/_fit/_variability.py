@@ -380,13 +380,15 @@ def _spike_and_slab(grid: np.ndarray, likelihood: np.ndarray) -> np.ndarray:
     return w / w.sum()
 
 
-def _line_search(model, z, phi, y, rows, c, theta, step, r):
+def _line_search(model, z, phi, y, rows, c, theta, step, r, at_theta):
     """``theta`` moved along the Gauss-Newton ``step``, halved until the generalised
     residual sum of squares ``r' C^-1 r`` does not rise (at most 30 halvings: then no
-    move), and the step taken. Where the levels barely
-    inform a direction (the sdof law's Kt, gain and R on two amplitudes) the full step
-    ran into a bound, where the Jacobian loses its column and the covariance is
-    singular; on a well-posed fit the full step is taken, as before."""
+    move); returns the new ``theta``, the step taken and the model's log levels and
+    their Jacobian there (``at_theta``, those at ``theta``, when it does not move), so
+    the next iteration need not evaluate them again. Where the levels barely inform a
+    direction (the sdof law's Kt, gain and R on two amplitudes) the full step ran into
+    a bound, where the Jacobian loses its column and the covariance is singular; on a
+    well-posed fit the full step is taken, as before."""
     k = theta.size
 
     def gls(res):
@@ -396,11 +398,12 @@ def _line_search(model, z, phi, y, rows, c, theta, step, r):
     for _ in range(31):
         trial = theta + step
         with np.errstate(divide="ignore", invalid="ignore"):  # a level at zero: rejected
-            g_all, _ = _model_log_levels(model, np.concatenate([trial, z[k:]]), phi)
+            levels = _model_log_levels(model, np.concatenate([trial, z[k:]]), phi)
+        g_all = levels[0]
         if np.all(np.isfinite(g_all)) and gls(y - g_all[rows]) <= before * (1.0 + 1e-12):
-            return trial, step
+            return trial, step, levels
         step = 0.5 * step
-    return theta, np.zeros_like(step)
+    return theta, np.zeros_like(step), at_theta
 
 
 def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variability:
@@ -416,21 +419,22 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
     z = np.asarray(z, float)
     theta = z[:k].copy()
     s = np.log(np.full(3, 0.01))
+    levels = _model_log_levels(model, np.concatenate([theta, z[k:]]), phi)
     for _ in range(12):
-        g_all, jac_all = _model_log_levels(model, np.concatenate([theta, z[k:]]), phi)
+        g_all, jac_all = levels
         r, g = free.y - g_all[rows], jac_all[rows]
         s = np.asarray(_fit_sds(jnp.asarray(s), jnp.asarray(mask), r, g, *args))
         s = np.clip(s, math.log(1e-6), math.log(2.0))
         tau2 = mask * np.exp(2.0 * s)
         _, step = _at(tau2, r, g, args)
         c = np.asarray(_covariance(tau2, *args))
-        theta, step = _line_search(model, z, phi, free.y, rows, c, theta, step, r)
+        theta, step, levels = _line_search(model, z, phi, free.y, rows, c, theta, step, r, levels)
         cov = np.linalg.inv(g.T @ np.linalg.solve(c, g))
         if not np.all(np.diag(cov) > 0.0):
             raise np.linalg.LinAlgError("they do not inform every physical parameter")
         if np.max(np.abs(step) / np.sqrt(np.diag(cov))) < 1e-3:
             break
-    g_all, jac_all = _model_log_levels(model, np.concatenate([theta, z[k:]]), phi)
+    g_all, jac_all = levels  # at theta
     r, g = free.y - g_all[rows], jac_all[rows]
     c = np.asarray(_covariance(tau2, *args))
     cov_theta = np.linalg.inv(g.T @ np.linalg.solve(c, g))

@@ -31,6 +31,7 @@ __all__ = [
     "TraceTiming",
     "dahl_at_load",
     "mean_force_n",
+    "on_contact",
     "on_friction_ratio",
     "smooth_max",
     "smooth_min",
@@ -62,11 +63,32 @@ def on_friction_ratio(
 
     ``law`` must already carry ``Fc = mu N`` for this load (see :func:`dahl_at_load`).
     """
+    return on_contact(
+        law,
+        coupling,
+        normal_load_n,
+        amplitude_fraction,
+        pull_speed_m_s,
+        vibration_frequency_hz,
+        max_amplitude_m,
+    )[0]
+
+
+def on_contact(
+    law: AbstractFrictionLaw,
+    coupling: AbstractCoupling,
+    normal_load_n: Float[ArrayLike, ""],
+    amplitude_fraction: Float[ArrayLike, ""],
+    pull_speed_m_s: Float[ArrayLike, ""],
+    vibration_frequency_hz: Float[ArrayLike, ""],
+    max_amplitude_m: Float[ArrayLike, ""],
+) -> tuple[Float[Array, ""], Float[Array, ""]]:
+    """:func:`on_friction_ratio` and the slip amplitude [m] it is taken at."""
     w = 2.0 * jnp.pi * jnp.asarray(vibration_frequency_hz)
     a = coupling.slip_amplitude_m(
         law, amplitude_fraction, normal_load_n, pull_speed_m_s, w, max_amplitude_m
     )
-    return prescribed_cycle_average(law, pull_speed_m_s, a, w).friction_ratio
+    return prescribed_cycle_average(law, pull_speed_m_s, a, w).friction_ratio, a
 
 
 def dahl_at_load(

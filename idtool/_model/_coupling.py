@@ -30,9 +30,12 @@ from collections.abc import Mapping
 from typing import ClassVar
 
 import equinox as eqx
+import jax
+import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from idtool._data._dataset import TransducerSpec
+from idtool._model._contact import CycleAverage
 from idtool._model._laws import AbstractFrictionLaw
 from idtool._model._params import Param
 from idtool._model._settings import ParameterSetting
@@ -122,6 +125,35 @@ class AbstractCoupling(eqx.Module):
         the contact's reaction."""
         del law, sliding_speed_m_s, angular_frequency_rad_s
         return self.amplitude_m(amplitude_fraction, normal_load_n, max_amplitude_m)
+
+    def drive_fraction(
+        self,
+        law: AbstractFrictionLaw,
+        slip_amplitude_m: Float[ArrayLike, ""],
+        cycle: CycleAverage,
+        normal_load_n: Float[ArrayLike, ""],
+        angular_frequency_rad_s: Float[ArrayLike, ""],
+        max_amplitude_m: Float[ArrayLike, ""],
+    ) -> Float[Array, ""]:
+        """The inverse of :meth:`slip_amplitude_m`: the commanded amplitude fraction in
+        [0, 1] at which the slip amplitude is ``slip_amplitude_m`` [m] (at most the one
+        of full command), ``cycle`` the contact's cycle average at that amplitude (a law
+        in which the contact loads the horn reads its harmonics). This default bisects
+        the friction-free amplitude (monotone in the command for every shipped
+        kinematic law; 2^-52 resolution, a few flops a step); a loaded law overrides it
+        (the inverse prediction, :mod:`idtool._predict._amplitude`, searches the slip
+        amplitude and calls this once a step)."""
+        del law, cycle, angular_frequency_rad_s
+        target = jnp.asarray(slip_amplitude_m)
+
+        def step(_, bounds):
+            lo, hi = bounds
+            mid = 0.5 * (lo + hi)
+            below = self.amplitude_m(mid, normal_load_n, max_amplitude_m) < target
+            return jnp.where(below, mid, lo), jnp.where(below, hi, mid)
+
+        lo, hi = jax.lax.fori_loop(0, 52, step, (jnp.asarray(0.0), jnp.asarray(1.0)))
+        return 0.5 * (lo + hi)
 
 
 def load_scale_param(name: str, description: str, hi: float = 1e5) -> Param:

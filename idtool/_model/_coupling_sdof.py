@@ -65,7 +65,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from idtool._model._contact import prescribed_cycle_average
+from idtool._model._contact import CycleAverage, prescribed_cycle_average
 from idtool._model._coupling import COUPLINGS, GAIN, AbstractCoupling
 from idtool._model._laws import AbstractFrictionLaw
 from idtool._model._params import Param
@@ -221,6 +221,26 @@ class SdofCoupling(AbstractCoupling):
         alpha = jnp.asarray(amplitude_fraction)
         shape = jnp.broadcast_shapes(alpha.shape, jnp.shape(normal_load_n))
         return jnp.broadcast_to(self.gain * alpha * max_amplitude_m, shape)
+
+    def drive_fraction(
+        self,
+        law: AbstractFrictionLaw,
+        slip_amplitude_m: Float[ArrayLike, ""],
+        cycle: CycleAverage,
+        normal_load_n: Float[ArrayLike, ""],
+        angular_frequency_rad_s: Float[ArrayLike, ""],
+        max_amplitude_m: Float[ArrayLike, ""],
+    ) -> Float[Array, ""]:
+        """The command that holds the horn at slip amplitude ``a``, in closed form: the
+        balance read the other way, ``alpha = |(D a - Fs1) + i (R a + Fc1)| / Fe_max``
+        (module docstring), ``cycle`` the contact's harmonics at ``a``."""
+        del law, normal_load_n, angular_frequency_rad_s
+        a = jnp.asarray(slip_amplitude_m)
+        force = jnp.hypot(
+            self.detuning_n_m * a - cycle.harmonic_sin_n,
+            self.loss_stiffness_n_m * a + cycle.harmonic_cos_n,
+        )
+        return force / self.drive_force_max_n(max_amplitude_m)
 
     def slip_amplitude_m(
         self,

@@ -1,11 +1,12 @@
 """The inverse prediction: the commanded amplitude for a target friction reduction.
 
 Per draw, the amplitude fraction in [0, 1] at which the mean FR (the curve with its
-discrepancy given the data) falls to ``1 - target / 100``, by bisection (FR falls
-monotonically as the commanded amplitude grows: the slip amplitude grows with it,
-power-limited or not). Draws for which even full amplitude does not reach the target
-count as "out of reach" (+inf), so the band's upper end, or the median itself, may be
-out of reach; the answer says so, with the reduction full amplitude does give.
+discrepancy given the data) falls to ``1 - target / 100``, by bisection on the slip
+amplitude (FR falls monotonically as it grows, and the command grows with it, loaded
+horn or not), each step mapped back to its command by the coupling law. Draws for
+which even full amplitude does not reach the target count as "out of reach" (+inf),
+so the band's upper end, or the median itself, may be out of reach; the answer says
+so, with the reduction full amplitude does give.
 Averaged over coupling laws (:mod:`idtool._predict._mixture`), every law's draws are
 pooled.
 """
@@ -20,12 +21,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from idtool._fit._discrepancy import discrepancy_moments, operating_coordinates
+from idtool._model._bench import on_contact
 from idtool._model._benchmodel import BenchModel
+from idtool._model._contact import prescribed_cycle_average
 from idtool._predict._predict import Draws, _band
 
 __all__ = ["AmplitudeFor", "amplitude_for_reduction"]
 
-_BISECTIONS = 40  # amplitude resolution 2^-40
+_BISECTIONS = 40  # slip amplitude resolution 2^-40 of full command's
 
 
 @dataclasses.dataclass(frozen=True)
@@ -90,26 +93,45 @@ def _amplitude_draws(model: BenchModel, v, load, speed, target_fr, kriging, xi):
     exp(d), d the discrepancy given the data, ``d = mean + sd xi`` with ``xi`` one
     standard normal per draw: :attr:`Draws.kriging`) falls to ``target_fr`` at ``load``
     and ``speed`` (inf if full amplitude does not reach it), and that FR at full
-    amplitude."""
+    amplitude.
+
+    The bisection runs on the slip amplitude ``a`` between 0 and full command's, and
+    maps each ``a`` back to its command with the coupling's
+    :meth:`~idtool.AbstractCoupling.drive_fraction`: a step then costs one cycle
+    average of the contact, where a step on the command would cost a whole solve of
+    the loaded horn (``sdof``: about 14 cycle averages). The FR falls as ``a`` grows
+    and the command grows with it, so the two searches find the same point."""
     x_rows, scales, weights, s_inv, sd = kriging
+    d = model.data
+    w = 2.0 * jnp.pi * jnp.asarray(d.vibration_frequency_hz)
 
     def solve(v, weights, s_inv, sd, xi):
-        def fr_at(alpha):
-            fr = model.friction_ratios(v, load[None], alpha[None], speed[None])[0]
+        law, coupling = model.law_at(v, load), model.coupling_of(v)
+
+        def mean_fr(fr, alpha):
             x = operating_coordinates(load, alpha, speed)[None]
             mean, var = discrepancy_moments(x, x_rows, scales, weights, s_inv, sd)
             return jnp.minimum(fr * jnp.exp(mean[0] + jnp.sqrt(var[0]) * xi), 1.0)
 
+        def at(a):  # (mean FR, command) at slip amplitude a
+            cycle = prescribed_cycle_average(law, speed, a, w)
+            alpha = coupling.drive_fraction(law, a, cycle, load, w, d.max_amplitude_m)
+            return mean_fr(cycle.friction_ratio, alpha), alpha
+
         def step(_, bounds):
             lo, hi = bounds
             mid = 0.5 * (lo + hi)
-            below = fr_at(mid) <= target_fr  # enough reduction already at mid
+            below = at(mid)[0] <= target_fr  # enough reduction already at mid
             return jnp.where(below, lo, mid), jnp.where(below, mid, hi)
 
-        fr_full = fr_at(jnp.asarray(1.0))
-        lo, hi = jax.lax.fori_loop(0, _BISECTIONS, step, (jnp.asarray(0.0), jnp.asarray(1.0)))
-        alpha = jnp.where(fr_full <= target_fr, 0.5 * (lo + hi), jnp.inf)
-        return alpha, fr_full
+        one = jnp.asarray(1.0)
+        fr_full, a_full = on_contact(
+            law, coupling, load, one, speed, d.vibration_frequency_hz, d.max_amplitude_m
+        )
+        fr_full = mean_fr(fr_full, one)
+        lo, hi = jax.lax.fori_loop(0, _BISECTIONS, step, (jnp.zeros_like(a_full), a_full))
+        alpha = jnp.minimum(at(0.5 * (lo + hi))[1], 1.0)
+        return jnp.where(fr_full <= target_fr, alpha, jnp.inf), fr_full
 
     return jax.vmap(solve)(v, weights, s_inv, sd, xi)
 

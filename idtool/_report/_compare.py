@@ -95,11 +95,17 @@ class ComparedFit:
                 value, ci, source = e.estimate, list(e.ci95), "fit"
             out[name] = {"unit": e.unit, "estimate": value, "ci95": ci, "source": source}
         physical = {p.name for p in self.fit.model.declared_params if p.physical}
-        for name, value in self.fit.model.fixed.items():  # held by the user in the fit
+        for name, value in self.fit.model.fixed.items():  # held in the fit: by whom, said
             if name not in physical:
                 continue
-            unit = self.fit.estimates[name].unit
-            out[name] = {"unit": unit, "estimate": value, "ci95": [value, value], "source": "fixed"}
+            e = self.fit.estimates[name]
+            out[name] = {
+                "unit": e.unit,
+                "estimate": value,
+                "ci95": [value, value],
+                "source": "fixed",
+                "fixed_by": e.fixed_label or "fixed",
+            }
         return out
 
 

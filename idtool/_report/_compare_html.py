@@ -136,7 +136,7 @@ def _estimates(c: Comparison) -> str:
             if e is None:
                 row.append("-")
             elif e["source"] == "fixed":
-                row.append(f"{g(e['estimate'])} (fixed by the user)")
+                row.append(f"{g(e['estimate'])} ({e['fixed_by']})")
             else:
                 row.append(f"{g(e['estimate'])} [{_interval(e['ci95'])}]")
         rows.append(row)

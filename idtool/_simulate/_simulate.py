@@ -39,8 +39,7 @@ import numpy as np
 from idtool._data._dataset import Dataset, dataset_from_bytes
 from idtool._data._write import document, json_bytes, render_table, trace_entry, write_dataset
 from idtool._errors import IdtoolError
-from idtool._model._bench import TraceTiming, dahl_at_load, mean_force_n
-from idtool._model._contact import prescribed_cycle_average
+from idtool._model._bench import TraceTiming, dahl_at_load, mean_force_n, on_contact
 from idtool._simulate._noise import ar1_noise, mains_hum, quantise, white_noise
 from idtool._simulate._params import ActuatorParams, BenchParams
 
@@ -207,14 +206,9 @@ def experiment_plan(params: BenchParams) -> tuple[OperatingPoint, ...]:
     return tuple(points)
 
 
-@jax.jit
-def _contact_at(law, coupling, load_n, alpha, speed_m_s, angular_frequency_rad_s, max_amplitude_m):
-    """FR and slip amplitude [m] at one operating point: one compiled program per law
-    and coupling type (the sdof law's solve is a loop, slow op by op)."""
-    a = coupling.slip_amplitude_m(
-        law, alpha, load_n, speed_m_s, angular_frequency_rad_s, max_amplitude_m
-    )
-    return prescribed_cycle_average(law, speed_m_s, a, angular_frequency_rad_s).friction_ratio, a
+# one compiled program per law and coupling type (the sdof law's solve is a loop, slow
+# op by op)
+_contact_at = jax.jit(on_contact)
 
 
 def operating_point(
@@ -230,7 +224,12 @@ def operating_point(
     coupling = params.coupling.model(rig.max_amplitude_m)
     law = dahl_at_load(c.friction_coefficient, jnp.asarray(c.contact_stiffness_n_m), load_n)
     w = 2.0 * math.pi * rig.vibration_frequency_hz
-    fr, a = (float(x) for x in _contact_at(law, coupling, load_n, alpha, v, w, rig.max_amplitude_m))
+    fr, a = (
+        float(x)
+        for x in _contact_at(
+            law, coupling, load_n, alpha, v, rig.vibration_frequency_hz, rig.max_amplitude_m
+        )
+    )
     return {
         "friction_ratio": float(fr),
         "slip_amplitude_m": a,
