@@ -6,7 +6,8 @@ is a question for the likelihood: the chosen fit is refitted with ``D`` held on 
 of fixed values, every other parameter free (the gain takes up the drive's magnitude),
 same AR(1) ``phi``, each point warm-started from its neighbour's optimum, as
 :func:`idtool._fit._intervals.profile_parameter` does. The rise of ``-2 log L`` over
-the best point is the profile; its 95% interval is where the rise stays below 3.84.
+the best point is the profile; its 95% interval is where the rise stays below 3.84,
+interpolated linearly between grid points (so no finer than the grid).
 
 The grid is physical, not a multiple of the fitted ``R`` (which runs to its bound
 where the friction barely loads the horn): ``D = m (w^2 - wn^2)`` of a 1 kg stack at
@@ -17,10 +18,12 @@ off resonance, either side.
 * The profile stays below 3.84 over the whole grid: the data cannot tell the detuning,
   ``D = 0`` stays an assumption, and the fit says so with the interval's reach.
 * The profile excludes ``D = 0`` (the best point beats resonance by more than 3.84):
-  the data inform the detuning, and the fit warns that the assumption costs that much
-  and how to lift it (``rig.transducer``, or ``detuning_n_m`` freed in a parameter
-  table; not done automatically: a detuned estimate from bench traces alone rests on
-  the contact model's harmonics, which a transducer's datasheet fixes better).
+  the data inform the detuning. The model with ``D`` estimated is then polished from
+  the profile's best point (:func:`detuned_fit`) and replaces the fit if its BIC is
+  lower, with a note of what resonance cost; otherwise the fit warns, and says how to
+  lift the assumption (``rig.transducer``, or ``detuning_n_m`` freed in a parameter
+  table). Either way ``D`` from bench traces alone rests on the contact model's
+  harmonics, which a transducer's datasheet fixes independently: the note says so.
 
 Each grid point is refitted from two starts, its neighbour's optimum and one where the
 friction loads the horn (:func:`_loaded_start`), the better kept; all are
@@ -30,14 +33,22 @@ masked).
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
-from idtool._fit._fit import FitResult, run_lm
+from idtool._fit._fit import FitResult, fit_model, run_lm
 from idtool._fit._intervals import Profile, profile_interval
-from idtool._model._benchmodel import bench_model
+from idtool._model._benchmodel import BenchModel, bench_model
 from idtool._model._settings import ParameterSetting
 
-__all__ = ["DETUNING", "detuning_assumed", "detuning_profile", "detuning_sentence"]
+__all__ = [
+    "DETUNING",
+    "detuned_fit",
+    "detuning_assumed",
+    "detuning_profile",
+    "detuning_sentence",
+]
 
 DETUNING = "detuning_n_m"
 # D [N/m] on the grid (module docstring)
@@ -54,29 +65,36 @@ def detuning_assumed(result: FitResult) -> bool:
     )
 
 
-def detuning_profile(result: FitResult, grid_n_m=GRID_N_M) -> Profile:
-    """Profile likelihood of ``D`` [N/m] over ``grid_n_m`` (ascending, with 0; module
-    docstring); ``result`` an sdof fit with ``D`` held at 0."""
+def _free_model(result: FitResult) -> BenchModel:
+    """``result``'s model with ``D`` estimated."""
     model = result.model
     settings = tuple(s for s in model.settings if s.name != DETUNING)
-    free = bench_model(
+    return bench_model(
         model.data,
         law=model.law,
         coupling=model.coupling,
         noise=type(model.noise),
         actuator=model.actuator,
         offset=model.offset,
-        settings=(*settings, ParameterSetting(DETUNING, source="detuning profile")),
+        settings=(*settings, ParameterSetting(DETUNING, source="identified from the traces")),
     )
+
+
+def detuning_profile(result: FitResult, grid_n_m=GRID_N_M) -> tuple[Profile, np.ndarray]:
+    """Profile likelihood of ``D`` [N/m] over ``grid_n_m`` (ascending, with 0; module
+    docstring), ``result`` an sdof fit with ``D`` held at 0; and the best grid point's
+    parameters (``z`` of the model with ``D`` estimated)."""
+    free = _free_model(result)
     i = free.names.index(DETUNING)
     spec = free.params[i]
-    held = dict(zip(model.names, np.asarray(result.z), strict=True))
+    held = dict(zip(result.model.names, np.asarray(result.z), strict=True))
     z0 = np.array([held.get(n, spec.internal(0.0)) for n in free.names])
     mask = np.ones(z0.size, bool)
     mask[i] = False
     values = np.asarray(grid_n_m, float)
     sigma2 = result.rss / (result.n_data - result.z.size)
     delta = np.empty(values.size)
+    at = [z0] * values.size
     mid = int(np.argmin(np.abs(values)))
     loaded = _loaded_start(free, z0, result)
     for order in (range(mid, values.size), range(mid, -1, -1)):
@@ -88,9 +106,38 @@ def detuning_profile(result: FitResult, grid_n_m=GRID_N_M) -> Profile:
                 outs.append(run_lm(free, start, mask, result.phi, 100))
             best = min(outs, key=lambda o: float(o.loss))
             delta[j] = (2.0 * float(best.loss) - result.rss) / sigma2
-            z = np.asarray(best.z)
+            z = at[j] = np.asarray(best.z)
     delta = delta - min(float(delta.min()), 0.0)  # from the best point on the grid
-    return Profile(DETUNING, values, delta, profile_interval(values, delta, _CHI2_95))
+    profile = Profile(DETUNING, values, delta, profile_interval(values, delta, _CHI2_95))
+    return profile, at[int(np.argmin(delta))]
+
+
+def detuned_fit(result: FitResult, z_best: np.ndarray) -> FitResult:
+    """The fit with ``D`` estimated, polished from the profile's best point ``z_best``
+    (as a nested model is: :func:`idtool._fit._fit.fit_model`'s ``start_from``)."""
+    free = _free_model(result)
+    # the multi-start's optima (physical z, reported with the fit) at D = 0, in the
+    # free model's order
+    held_names = result.model.physical_names
+    zero = free.params[free.names.index(DETUNING)].internal(0.0)
+
+    def widened(o: dict) -> dict:
+        by_name = dict(zip(held_names, np.asarray(o["z"]), strict=True))
+        return o | {"z": np.array([by_name.get(n, zero) for n in free.physical_names])}
+
+    optima = [widened(o) for o in result.optima]
+    start = dataclasses.replace(result, model=free, z=np.asarray(z_best), optima=optima)
+    m = result.model
+    return fit_model(
+        m.data,
+        m.law.name,
+        m.coupling.name,
+        noise=m.noise.name,
+        actuator=m.actuator.name,
+        start_from=start,
+        offset=m.offset.name,
+        settings=free.settings,
+    )
 
 
 def _loaded_start(free, z0: np.ndarray, result: FitResult) -> np.ndarray:
@@ -109,10 +156,26 @@ def _loaded_start(free, z0: np.ndarray, result: FitResult) -> np.ndarray:
     return out
 
 
-def detuning_sentence(profile: Profile) -> tuple[str, bool]:
-    """What the profile says, and whether it is a warning (the data exclude ``D = 0``)."""
+def detuning_sentence(
+    profile: Profile, held: FitResult, detuned: FitResult | None = None
+) -> tuple[str, bool]:
+    """What the profile says, and whether it is a warning: the traces exclude ``D = 0``
+    and no ``detuned`` fit (``D`` estimated) beat ``held`` (``D = 0``) on BIC."""
     at_zero = float(np.interp(0.0, profile.values, profile.delta))
     lo, hi = profile.ci95
+    if detuned is not None:
+        e = detuned.estimates[DETUNING]
+        return (
+            f"the transducer's detuning identified from the traces (no rig.transducer): "
+            f"D = {e.estimate:.3g} N/m, 95% [{e.ci95[0]:.3g}, {e.ci95[1]:.3g}] (the "
+            f"profile over a grid of D found this basin, best grid point "
+            f"{profile.values[int(np.argmin(profile.delta))]:.3g} N/m); driven at "
+            f"resonance (D = 0) the fit was worse by "
+            f"{at_zero:.1f} in -2 log L and {held.bic - detuned.bic:.1f} in BIC. D rests "
+            f"on the contact model's harmonics here; rig.transducer (modal mass, natural "
+            f"frequency) would fix it independently",
+            False,
+        )
     if at_zero >= _CHI2_95:
         best = float(profile.values[int(np.argmin(profile.delta))])
         return (

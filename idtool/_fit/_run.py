@@ -28,6 +28,7 @@ from idtool._data._mains import resolve_mains
 from idtool._errors import IdtoolError
 from idtool._fit._detuning import (
     DETUNING,
+    detuned_fit,
     detuning_assumed,
     detuning_profile,
     detuning_sentence,
@@ -228,8 +229,19 @@ def fit_dataset(
     profiles = {}
     if detuning_assumed(best):  # sdof without rig.transducer: can the data tell D?
         say(f"profiling the transducer's detuning of {best_key}")
-        profiles[DETUNING] = prof = detuning_profile(best)
-        sentence, warn = detuning_sentence(prof)
+        prof, z_best = detuning_profile(best)
+        profiles[DETUNING] = prof
+        sentence, warn = detuning_sentence(prof, best)
+        if warn:  # the traces inform D: estimate it, keep it if BIC says so
+            say(f"fitting {best_key} with the detuning free")
+            detuned = detuned_fit(best, z_best)
+            if detuned.bic < best.bic:
+                detuned = check_intervals(detuned)  # D's interval checked there
+                sentence, warn = detuning_sentence(prof, best, detuned)
+                # the grid found the basin; its interval, interpolated between grid
+                # points around another optimum, is not D's: the checked one is
+                del profiles[DETUNING]
+                best = detuned
         if warn:
             best = dataclasses.replace(best, warnings=[*best.warnings, sentence])
         else:
