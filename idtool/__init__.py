@@ -38,7 +38,7 @@ _LAZY = {
     "import_daq": "idtool._data._import",
     "write_dataset": "idtool._data._write",
     "IdtoolError": "idtool._errors",
-    "Estimate": "idtool._fit._fit",
+    "Estimate": "idtool._fit._result",
     "read_parameter_table": "idtool._fit._parameter_table",
     "ParameterSetting": "idtool._model._settings",
     "ACTUATORS": "idtool._model._actuator",
@@ -94,7 +94,7 @@ _LAZY = {
     "compare_fits": "idtool._report._compare",
     "BenchParams": "idtool._simulate._params",
     "load_bench_params": "idtool._simulate._params",
-    "BenchTruth": "idtool._simulate._simulate",
+    "BenchTruth": "idtool._simulate._truth",
     "simulate_bench": "idtool._simulate._simulate",
     "write_simulation": "idtool._simulate._simulate",
     "Fit": "idtool._workflow",
@@ -199,8 +199,8 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
     from idtool._data._import import import_daq
     from idtool._data._write import write_dataset
     from idtool._errors import IdtoolError
-    from idtool._fit._fit import Estimate
     from idtool._fit._parameter_table import read_parameter_table
+    from idtool._fit._result import Estimate
     from idtool._model._actuator import ACTUATORS, AbstractActuator, LagActuator, SlopeActuator
     from idtool._model._bench import on_friction_ratio
     from idtool._model._benchmodel import BenchModel, bench_model
@@ -238,5 +238,6 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
     from idtool._report._compare import Comparison, compare_fits
     from idtool._report._html import write_report
     from idtool._simulate._params import BenchParams, load_bench_params
-    from idtool._simulate._simulate import BenchTruth, simulate_bench, write_simulation
+    from idtool._simulate._simulate import simulate_bench, write_simulation
+    from idtool._simulate._truth import BenchTruth
     from idtool._workflow import Fit, fit, load_fit

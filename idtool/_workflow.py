@@ -23,8 +23,8 @@ from idtool._atomic import atomic_output_dir
 from idtool._data._dataset import Dataset, load_dataset
 from idtool._data._write import write_dataset
 from idtool._errors import IdtoolError
-from idtool._fit._fit import Estimate, FitResult
 from idtool._fit._parameter_table import parse_fix, read_parameter_table
+from idtool._fit._result import Estimate, FitResult
 from idtool._fit._run import FitRun, fit_dataset
 from idtool._fit._store import StoredFit, law_state_file, load_stored_fit, save_fit_state
 from idtool._model._benchmodel import BenchModel

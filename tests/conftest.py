@@ -3,11 +3,13 @@
 import os
 
 os.environ.setdefault("MPLBACKEND", "Agg")
-# No on-disk compilation cache in tests (the CLI turns it on when ``main`` runs): twice
-# a fresh-clone run lost an xdist worker to a segfault inside JAX with the cache on
-# (reading an entry, b204230; compiling-and-writing one, this session's CI), never with
-# it off; and it did not save time here (42.6 against 42.0 CPU minutes). The cache's
-# own locking is tested in tests/test_validate_cli.py with an explicit folder.
+# No on-disk compilation cache in tests (the CLI turns it on when ``main`` runs): it did
+# not save time here (42.6 against 42.0 CPU minutes), and tests should not depend on
+# what an earlier run left on disk. (Worker crashes inside XLA's CPU compile were blamed
+# on it once; one recurred with it off, under load: its stack's
+# ``_compile_and_write_cache`` is JAX's compile path whenever
+# ``jax_enable_compilation_cache`` is on, its default, folder or not.) The cache's own
+# locking is tested in tests/test_validate_cli.py with an explicit folder.
 os.environ["IDTOOL_CACHE_DIR"] = ""
 
 import jax

@@ -131,3 +131,37 @@ def test_the_compilation_cache_is_locked_between_processes(tmp_path):
     assert cache.eviction_enabled
     cache.put("k", b"v")
     assert cache.get("k") == b"v" and (tmp_path / ".lockfile").exists()  # it locked
+
+
+def test_help_validate_and_import_do_not_load_jax(tmp_path):
+    """The parser of every command is built on each call, and the fit, sample,
+    parameters and curve commands take their choices from the registries, whose modules
+    import JAX (about a second): the choices are read only when that command's value is
+    checked or its help printed, so ``idtool --help`` and ``idtool validate`` stay
+    quick. The choices still reach the help and the error message."""
+    code = (
+        "import contextlib, io, sys\n"
+        "from idtool._cli._main import main\n"
+        "for argv in (['--help'], ['validate', '--help']):\n"
+        "    with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):\n"
+        "        main(argv)\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        f"    assert main(['validate', {str(idtool.example_dataset_path())!r}]) == 0\n"
+        "print(sorted(m for m in ('jax', 'equinox') if m in sys.modules))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"
+    fit_help = subprocess.run(
+        [sys.executable, "-m", "idtool._cli._main", "fit", "--help"], capture_output=True, text=True
+    ).stdout
+    assert "coupling law: constant, exponential, power-limited, sdof, auto" in " ".join(
+        fit_help.split()
+    )
+    bad = subprocess.run(
+        [sys.executable, "-m", "idtool._cli._main", "fit", "x", "--out", str(tmp_path / "o"),
+         "--coupling", "bogus"],
+        capture_output=True,
+        text=True,
+    )  # fmt: skip
+    assert bad.returncode == 2 and "invalid choice: 'bogus' (choose from 'constant'" in bad.stderr

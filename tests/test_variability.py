@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import idtool
-from idtool._fit import _variability as V
+from idtool._fit import _reml as reml
 from idtool._fit._discrepancy import Conditioning, correlation, discrepancy_moments
 from idtool._predict._predict import Draws, with_variability
 
@@ -42,11 +42,11 @@ def test_neg_log_lik_is_the_gaussian_density_with_theta_profiled():
     e = r - g @ beta
     ml = 0.5 * (e @ ci @ e + np.linalg.slogdet(c)[1])
     args = (jnp.asarray(r), jnp.asarray(g), jnp.asarray(v), jnp.asarray(kinds), jnp.asarray(zz))
-    got, step = V._neg_log_lik(jnp.asarray(tau2), *args, False)
+    got, step = reml.neg_log_lik(jnp.asarray(tau2), *args, False)
     np.testing.assert_allclose(float(got), ml, rtol=1e-10)
     np.testing.assert_allclose(np.asarray(step), beta, rtol=1e-8)
-    reml, _ = V._neg_log_lik(jnp.asarray(tau2), *args, True)
-    np.testing.assert_allclose(float(reml) - ml, 0.5 * np.linalg.slogdet(g.T @ ci @ g)[1])
+    restricted, _ = reml.neg_log_lik(jnp.asarray(tau2), *args, True)
+    np.testing.assert_allclose(float(restricted) - ml, 0.5 * np.linalg.slogdet(g.T @ ci @ g)[1])
 
 
 def test_clean_example_nests_the_noise_only_fit(example_fits):

@@ -3,9 +3,35 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import math
+from collections.abc import Callable, Iterable, Iterator
 
-__all__ = ["number_list"]
+__all__ = ["LazyChoices", "number_list"]
+
+
+class LazyChoices:
+    """An argparse ``choices`` whose names are read only when argparse needs them (to
+    check a given value, or to print this command's help). The registries' names come
+    with the modules that define the laws, which import JAX (about a second): building
+    every command's parser eagerly made ``idtool --help``, ``validate`` and ``import``
+    pay it too."""
+
+    def __init__(self, names: Callable[[], Iterable[str]]):
+        self._names = names
+
+    @functools.cached_property
+    def _values(self) -> tuple[str, ...]:
+        return tuple(self._names())
+
+    def __contains__(self, value: object) -> bool:
+        return value in self._values
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._values)
+
+    def __len__(self) -> int:
+        return len(self._values)
 
 
 def number_list(text: str) -> list[float]:

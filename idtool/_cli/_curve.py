@@ -9,13 +9,15 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+from typing import TYPE_CHECKING
 
-import jax.numpy as jnp
 import numpy as np
 
+from idtool._cli._args import LazyChoices
 from idtool._errors import IdtoolError
-from idtool._model._contact import cycle_average_curve
-from idtool._model._laws import FRICTION_LAWS, AbstractFrictionLaw
+
+if TYPE_CHECKING:
+    from idtool._model._laws import AbstractFrictionLaw
 
 __all__ = ["dimensionless_law", "friction_curve", "parse_number_list", "register"]
 
@@ -53,6 +55,10 @@ def dimensionless_law(
     """
     # The registered law from its fit parameters, at unit load with mu = 1 (Fc = 1).
     values = {"mu": 1.0, "Kt": lam, "static_ratio": fs_ratio, "stribeck_velocity_m_s": stribeck_vr}
+    import jax.numpy as jnp
+
+    from idtool._model._laws import FRICTION_LAWS
+
     law = FRICTION_LAWS.get(name).at_load({k: jnp.asarray(v) for k, v in values.items()}, 1.0)
     if s1 or s2:  # LuGre's damping terms, which the fit does not identify
         damping = {"s1_n_s_m": s1 * lam, "s2_n_s_m": s2}
@@ -65,6 +71,10 @@ def dimensionless_law(
 
 def friction_curve(law: AbstractFrictionLaw, vr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Friction ratio and power ratio of the dimensionless contact at each VR."""
+    import jax.numpy as jnp
+
+    from idtool._model._contact import cycle_average_curve
+
     out = cycle_average_curve(law, jnp.asarray(vr))
     return np.asarray(out.friction_ratio), np.asarray(out.power_ratio)
 
@@ -94,6 +104,12 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _law_names() -> tuple[str, ...]:
+    from idtool._model._laws import FRICTION_LAWS
+
+    return FRICTION_LAWS.names()
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "curve",
@@ -102,7 +118,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "contact whose slip is sliding at v plus a sinusoid of amplitude a, against the "
         "velocity ratio VR = v / (a w) (model notes §3-4).",
     )
-    p.add_argument("--law", choices=FRICTION_LAWS.names(), default="dahl")
+    p.add_argument(
+        "--law",
+        choices=LazyChoices(_law_names),
+        metavar="LAW",
+        default="dahl",
+        help="friction law: %(choices)s (default dahl)",
+    )
     p.add_argument("--vr", default="0.1,0.3,0.5,0.7,0.9", help="0.1,0.5,0.9 or start:stop:count")
     p.add_argument(
         "--lambda", dest="lam", type=float, default=5.0, help="Lambda = Kt a / Fc (default 5)"

@@ -5,9 +5,11 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from idtool._atomic import refuse_existing
+from idtool._cli._args import LazyChoices
 
 __all__ = ["register"]
 
@@ -63,11 +65,30 @@ def _progress(line: str) -> None:
     print(f"idtool fit: {line}", file=sys.stderr, flush=True)
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    from idtool import ACTUATORS, COUPLINGS, FRICTION_LAWS, NOISE_MODELS, OFFSETS
-    from idtool._model._noise import DEFAULT_NOISE
+def _fittable_laws() -> list[str]:
+    from idtool import FRICTION_LAWS
 
-    fittable = [n for n in FRICTION_LAWS if FRICTION_LAWS.get(n).fit_params]
+    return [n for n in FRICTION_LAWS if FRICTION_LAWS.get(n).fit_params]
+
+
+def _with_auto(registry: str) -> Callable[[], tuple[str, ...]]:
+    def names() -> tuple[str, ...]:
+        import idtool
+
+        return (*getattr(idtool, registry).names(), "auto")
+
+    return names
+
+
+def _noise_names() -> tuple[str, ...]:
+    from idtool import NOISE_MODELS
+
+    return NOISE_MODELS.names()
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from idtool._model._names import DEFAULT_NOISE
+
     p = sub.add_parser(
         "fit",
         help="fit Kt, mu and the coupling to a dataset",
@@ -76,33 +97,43 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("dataset", help="dataset folder (or its dataset.json)")
     p.add_argument("--out", required=True, help="output folder, e.g. fits/NAME")
-    p.add_argument("--law", choices=fittable, default="dahl", help="friction law (default dahl)")
+    p.add_argument(
+        "--law",
+        choices=LazyChoices(_fittable_laws),
+        metavar="LAW",
+        default="dahl",
+        help="friction law: %(choices)s (default dahl)",
+    )
     p.add_argument(
         "--coupling",
-        choices=(*COUPLINGS.names(), "auto"),
+        choices=LazyChoices(_with_auto("COUPLINGS")),
+        metavar="LAW",
         default="power-limited",
-        help="coupling law (default power-limited, the paper's finding); auto fits every "
-        "coupling law and keeps the lowest BIC",
+        help="coupling law: %(choices)s (default power-limited, the paper's finding); "
+        "auto fits every coupling law and keeps the lowest BIC",
     )
     p.add_argument(
         "--actuator",
-        choices=(*ACTUATORS.names(), "auto"),
+        choices=LazyChoices(_with_auto("ACTUATORS")),
+        metavar="MODEL",
         default="auto",
-        help="how the force follows its target: slope (constant slopes), lag (first-order "
-        "lag with a rate limit); default auto fits both and keeps the lower BIC",
+        help="how the force follows its target, %(choices)s: slope (constant slopes), lag "
+        "(first-order lag with a rate limit); default auto fits both and keeps the lower BIC",
     )
     p.add_argument(
         "--offset",
-        choices=(*OFFSETS.names(), "auto"),
+        choices=LazyChoices(_with_auto("OFFSETS")),
+        metavar="MODEL",
         default="auto",
-        help="the load-cell offset within a trace: constant, drift (linear, per trace); "
-        "default auto fits both and keeps the lower BIC",
+        help="the load-cell offset within a trace, %(choices)s: constant, drift (linear, "
+        "per trace); default auto fits both and keeps the lower BIC",
     )
     p.add_argument(
         "--noise",
-        choices=NOISE_MODELS.names(),
+        choices=LazyChoices(_noise_names),
+        metavar="MODEL",
         default=DEFAULT_NOISE,
-        help=f"noise model of the block means (default {DEFAULT_NOISE})",
+        help=f"noise model of the block means: %(choices)s (default {DEFAULT_NOISE})",
     )
     p.add_argument(
         "--variability",

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
 
 from idtool._atomic import refuse_existing, write_text_atomic
+from idtool._cli._args import LazyChoices
+from idtool._model._names import DEFAULT_ACTUATOR
 
 __all__ = ["register"]
 
@@ -30,10 +33,18 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    from idtool import ACTUATORS, COUPLINGS, FRICTION_LAWS
+def _names(registry: str) -> Callable[[], tuple[str, ...]]:
+    def names() -> tuple[str, ...]:
+        import idtool
 
-    fittable = [n for n in FRICTION_LAWS if FRICTION_LAWS.get(n).fit_params]
+        return getattr(idtool, registry).names()
+
+    return names
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from idtool._cli._fit import _fittable_laws
+
     p = sub.add_parser(
         "parameters",
         help="write a model's parameter table (PEtab-like) for 'idtool fit --parameters'",
@@ -42,14 +53,27 @@ def register(sub: argparse._SubParsersAction) -> None:
         "a parameter table to edit (fix a value with estimate 0 and nominalValue, narrow "
         "the bounds, give a start or a prior) and pass to 'idtool fit --parameters'.",
     )
-    p.add_argument("--law", choices=fittable, default="dahl", help="friction law (default dahl)")
+    p.add_argument(
+        "--law",
+        choices=LazyChoices(_fittable_laws),
+        metavar="LAW",
+        default="dahl",
+        help="friction law: %(choices)s (default dahl)",
+    )
     p.add_argument(
         "--coupling",
-        choices=COUPLINGS.names(),
+        choices=LazyChoices(_names("COUPLINGS")),
+        metavar="LAW",
         default="power-limited",
-        help="coupling law (default power-limited)",
+        help="coupling law: %(choices)s (default power-limited)",
     )
-    p.add_argument("--actuator", choices=ACTUATORS.names(), default="slope", help="actuator model")
+    p.add_argument(
+        "--actuator",
+        choices=LazyChoices(_names("ACTUATORS")),
+        metavar="MODEL",
+        default=DEFAULT_ACTUATOR,
+        help=f"actuator model: %(choices)s (default {DEFAULT_ACTUATOR})",
+    )
     p.add_argument("-o", "--out", help="write the table to this file (default: print it)")
     p.add_argument("--force", action="store_true", help="replace an existing --out")
     p.set_defaults(func=_run)

@@ -81,7 +81,8 @@ def _positive_int(text: str) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from idtool._model._noise import NOISE_MODELS
+    from idtool._cli._args import LazyChoices
+    from idtool._cli._fit import _noise_names
 
     p = sub.add_parser(
         "sample",
@@ -100,9 +101,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--force", action="store_true", help="discard an existing chain.h5")
     p.add_argument(
         "--noise",
-        choices=NOISE_MODELS.names(),
+        choices=LazyChoices(_noise_names),
+        metavar="MODEL",
         default=None,
-        help="noise model of the block means (default: the fit's, ar1 unless told; "
+        help="noise model of the block means, %(choices)s (default: the fit's, ar1 unless told; "
         "load-cell noise is correlated, independent noise gives falsely tight posteriors)",
     )
     p.add_argument("--priors", help="TOML or JSON file overriding default priors")

@@ -6,13 +6,14 @@ import argparse
 
 from idtool._atomic import refuse_existing
 from idtool._errors import IdtoolError
-from idtool._simulate._params import load_bench_params
-from idtool._simulate._simulate import TRUTH_FILE, simulate_bench, write_simulation
 
 __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
+    from idtool._simulate._params import load_bench_params
+    from idtool._simulate._simulate import TRUTH_FILE, simulate_bench, write_simulation
+
     refuse_existing(args.out, args.force)
     params = load_bench_params(args.params)
     dataset, truth = simulate_bench(params, args.seed)

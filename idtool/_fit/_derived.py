@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from idtool._fit._fit import Z95, Estimate, FitResult
+from idtool._fit._result import Z95, Estimate, FitResult
 
 __all__ = ["derived_estimates"]
 

@@ -18,7 +18,8 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
-from idtool._fit._fit import Z95, Z_AT_BOUND, FitResult, run_lm
+from idtool._fit._fit import run_lm
+from idtool._fit._result import Z95, Z_AT_BOUND, FitResult
 
 __all__ = [
     "Profile",

@@ -33,8 +33,9 @@ from idtool._fit._detuning import (
     detuning_profile,
     detuning_sentence,
 )
-from idtool._fit._fit import FitResult, fit_model
+from idtool._fit._fit import fit_model
 from idtool._fit._intervals import Profile, check_intervals, profile_parameter
+from idtool._fit._result import FitResult
 from idtool._fit._variability import with_variability
 from idtool._model._actuator import ACTUATORS
 from idtool._model._benchmodel import shared_params_of

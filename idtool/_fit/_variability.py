@@ -20,13 +20,9 @@ per operating point ``c`` and ``d`` cannot be told apart: their sum is estimated
 
 Estimation, in two stages (a Laplace approximation of the marginal likelihood):
 
-1. **Free levels** (:func:`free_levels`): every trace's OFF and ON levels are fitted
-   freely, with the bench nuisances (offsets, pull starts, horn lags, actuator slopes),
-   on the same AR(1)-whitened block means as the fit. Their estimates ``y`` (log OFF,
-   log FR) and covariance ``V`` summarise what the traces say about the levels; the
-   bench model is linear in the levels, so this summary loses nothing to first order.
-   An ON window too short for the force to settle (``MIN_AT_LEVEL_S``) does not measure
-   its ON level: that trace's FR is left out (its OFF level stays).
+1. **Free levels** (:func:`~idtool._fit._free_levels.free_levels`): every trace's OFF
+   and ON levels fitted freely, with the bench nuisances, on the fit's own block means:
+   estimates ``y`` (log OFF, log FR) and covariance ``V`` (:mod:`idtool._fit._free_levels`).
 2. **Levels model**: ``y ~ N(g(theta), V + Sigma(sds))`` with ``g`` the physical model's
    log levels. The sds are estimated by restricted maximum likelihood (REML: the
    physical parameters profiled on the linearised model, so that fitting k parameters
@@ -55,31 +51,25 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
-from jax.scipy.linalg import cho_solve
 
 from idtool._fit._discrepancy import Conditioning, correlation, length_scales, operating_coordinates
-from idtool._fit._fit import FitResult, estimate_of, run_lm
+from idtool._fit._free_levels import MIN_AT_LEVEL_S, FreeLevels, free_levels, model_log_levels
+from idtool._fit._reml import GRID, at_sds, covariance, evaluate, fit_sds
+from idtool._fit._result import FitResult, estimate_of
 from idtool._model._benchmodel import BenchModel
 from idtool._model._params import Param
 
 __all__ = [
-    "MIN_AT_LEVEL_S",
     "MISFIT",
     "SD_PARAMS",
-    "FreeLevels",
     "LevelDesign",
     "Variability",
     "discrepancy_conditioning",
     "estimate_variability",
-    "free_levels",
     "level_design",
     "with_variability",
 ]
 
-# An ON level counts as measured when the force sits at it for this long (about four
-# 40 ms blocks): shorter, the trace only bounds it (its depth is beyond the slope's reach).
-MIN_AT_LEVEL_S = 0.15
 SD_PARAMS = (
     Param(
         "scatter_mu",
@@ -107,7 +97,6 @@ SD_PARAMS = (
         "(relative): what the model's curve misses",
     ),
 )
-_GRID = 241  # points of each sd's grid (REML likelihood times the spike-and-slab prior)
 # A discrepancy whose 95% interval starts above this (3% of the friction ratio) says the
 # physical model is misspecified: on the coverage benches it does so on 6 of the 6
 # whose coupling has a shape the fit does not ship (lower ends 0.04-0.08) and on none
@@ -118,158 +107,6 @@ MISSPECIFIED_SD = 0.03
 MISFIT = "the physical model misses"
 SD_SLAB_SCALE = 0.1  # half-normal scale of an sd's prior when it is not zero
 SD_PRIOR_ZERO = 0.5  # prior probability that an sd is zero
-
-
-@dataclasses.dataclass(frozen=True)
-class FreeLevels:
-    """Every trace's OFF and ON level fitted freely (stage 1, module docstring).
-
-    ``y`` holds log OFF for every trace, then log FR for the traces in ``measured``;
-    ``cov_y`` its covariance (AR(1) noise, nuisances and shared slopes integrated).
-    """
-
-    off_n: np.ndarray
-    on_n: np.ndarray
-    measured: np.ndarray  # (traces,) the ON level is reached and measured
-    y: np.ndarray
-    cov_y: np.ndarray
-    sigma_n: float
-
-    @property
-    def friction_ratio(self) -> np.ndarray:
-        """Each trace's own FR (NaN where its ON level is not measured)."""
-        return np.where(self.measured, self.on_n / self.off_n, np.nan)
-
-    @property
-    def friction_ratio_se(self) -> np.ndarray:
-        m = self.off_n.size
-        se = np.full(m, np.nan)
-        k = np.flatnonzero(self.measured)
-        se_log = np.sqrt(np.diag(self.cov_y)[m:])
-        se[k] = self.friction_ratio[k] * se_log
-        return se
-
-
-def _at_level_s(model: BenchModel, z: np.ndarray, levels: np.ndarray) -> np.ndarray:
-    """Per trace: how long the force sits at its ON level [s] (-inf without ON), from
-    the levels ``(OFF, ON)`` [N] at ``z``."""
-    d = model.data
-    v = model.values(jnp.asarray(z))
-    off, on = np.split(levels, 2)
-    start = np.asarray(d.on_start_s) + np.asarray(v["delay_on_s"])
-    end = np.asarray(d.on_end_s) + np.asarray(v["delay_off_s"])
-    with np.errstate(invalid="ignore"):
-        length = np.where(np.isfinite(start) & np.isfinite(end), end - start, -np.inf)
-    settle = np.asarray(model.actuator_of(v).settle_time_s(off - on))
-    return length - settle
-
-
-def _linearise(model: BenchModel, z: np.ndarray, phi: float):
-    """The fit's own linearisation at ``z`` (no new program to compile): the whitened
-    residuals, the levels ``(OFF, ON)``, their Jacobian in the physical parameters and
-    the normal equations in ``u = (OFF, ON, z[k:])``."""
-    out = run_lm(model, jnp.asarray(z), jnp.ones(z.size, bool), phi, 0)
-    return (np.asarray(out.residuals), *(np.asarray(x) for x in out.aux))
-
-
-def free_levels(model: BenchModel, z: np.ndarray, phi: float) -> FreeLevels:
-    """Stage 1: the traces' own levels, from the fit ``z`` (module docstring).
-
-    One Gauss-Newton step in ``u`` from the fit's optimum: the block means are linear
-    in the levels wherever the force sits at them, so the step lands on the free
-    optimum up to the nuisances' second-order terms (on the example, Levenberg-Marquardt
-    run to convergence in ``u`` moved the free FRs by ~1e-4, a twentieth of their
-    standard errors; measured while this was written, not a test).
-    """
-    k, m = model.n_physical, model.data.n_traces
-    w, lv, _, jtj_u, jtr_u = _linearise(model, z, phi)
-    measured = _at_level_s(model, z, lv) >= MIN_AT_LEVEL_S
-    u = np.concatenate([lv, z[k:]])
-    free = np.flatnonzero(np.concatenate([np.ones(m, bool), measured, np.ones(z.size - k, bool)]))
-    jtj = jtj_u[np.ix_(free, free)]
-    step = np.linalg.solve(jtj, jtr_u[free])
-    u[free] -= step
-    # the residual sum of squares at the free optimum, to second order
-    rss = float(w @ w) - float(jtr_u[free] @ step)
-    sigma2 = rss / (w.size - free.size)
-    cov_u = np.zeros((u.size, u.size))
-    cov_u[np.ix_(free, free)] = sigma2 * np.linalg.inv(jtj)
-    # y = (log OFF, log ON - log OFF for the measured); its Jacobian in u
-    idx = np.flatnonzero(measured)
-    dy = np.zeros((m + idx.size, u.size))
-    dy[np.arange(m), np.arange(m)] = 1.0 / u[:m]
-    dy[m + np.arange(idx.size), m + idx] = 1.0 / u[m + idx]
-    dy[m + np.arange(idx.size), idx] = -1.0 / u[idx]
-    y = np.concatenate([np.log(u[:m]), np.log(u[m + idx] / u[idx])])
-    return FreeLevels(
-        off_n=u[:m],
-        on_n=u[m : 2 * m],
-        measured=measured,
-        y=y,
-        cov_y=dy @ cov_u @ dy.T,
-        sigma_n=math.sqrt(sigma2),
-    )
-
-
-def _model_log_levels(model: BenchModel, z: np.ndarray, phi: float):
-    """log OFF and log FR per trace at ``z`` and their Jacobian in the physical
-    parameters: (2 traces,), (2 traces, k)."""
-    _, lv, dlv, _, _ = _linearise(model, z, phi)
-    m = lv.size // 2
-    off, on = lv[:m], lv[m:]
-    g = np.concatenate([np.log(off), np.log(on / off)])
-    jac = np.concatenate([dlv[:m] / off[:, None], dlv[m:] / on[:, None] - dlv[:m] / off[:, None]])
-    return g, jac
-
-
-# ---------------------------------------------------------------- the levels model
-def _covariance(tau2, v, kinds, zz):
-    """``V + Sigma(sds)``: ``kinds`` (n, 2) one-hot OFF / FR rows, ``zz`` the
-    discrepancy's correlation between the FR rows (0 in the OFF rows)."""
-    diag = kinds[:, 0] * tau2[0] + kinds[:, 1] * tau2[1]
-    return v + jnp.diag(diag) + tau2[2] * zz
-
-
-def _neg_log_lik(tau2, r, g, v, kinds, zz, restricted):
-    """-log of the (restricted) likelihood of the level residuals ``r`` (theta profiled
-    on the linearised model ``g``), up to a constant; and theta's Gauss-Newton step."""
-    c = _covariance(tau2, v, kinds, zz)
-    chol = jnp.linalg.cholesky(c)
-    ci_r = cho_solve((chol, True), r)
-    ci_g = cho_solve((chol, True), g)
-    a = g.T @ ci_g
-    step = jnp.linalg.solve(a, g.T @ ci_r)
-    rt = r - g @ step
-    quad = rt @ cho_solve((chol, True), rt)
-    logdet_c = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol)))
-    logdet_a = jnp.linalg.slogdet(a)[1]
-    return 0.5 * (quad + logdet_c + jnp.where(restricted, logdet_a, 0.0)), step
-
-
-@jax.jit
-def _fit_sds(s0, free, r, g, v, kinds, zz):
-    """REML log sds (optimistix BFGS); the sds outside ``free`` stay 0."""
-
-    def loss(s, _):
-        return _neg_log_lik(free * jnp.exp(2.0 * s), r, g, v, kinds, zz, True)[0]
-
-    sol: optx.Solution = optx.minimise(
-        loss, optx.BFGS(rtol=1e-8, atol=1e-8), s0, max_steps=200, throw=False
-    )
-    return sol.value
-
-
-@jax.jit
-def _evaluate(tau2_rows, r, g, v, kinds, zz, restricted):
-    """-log (restricted) likelihood and theta's step at every row of ``tau2_rows``
-    (rows, 3): one program for the profiles and the steps."""
-    return jax.vmap(lambda t: _neg_log_lik(t, r, g, v, kinds, zz, restricted))(tau2_rows)
-
-
-def _at(tau2, r, g, args, restricted=False):
-    """:func:`_evaluate` at one ``tau2`` (padded to the grid's shape: one program)."""
-    nll, step = _evaluate(jnp.tile(jnp.asarray(tau2), (_GRID, 1)), r, g, *args, restricted)
-    return float(nll[0]), np.asarray(step[0])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -398,7 +235,7 @@ def _line_search(model, z, phi, y, rows, c, theta, step, r, at_theta):
     for _ in range(31):
         trial = theta + step
         with np.errstate(divide="ignore", invalid="ignore"):  # a level at zero: rejected
-            levels = _model_log_levels(model, np.concatenate([trial, z[k:]]), phi)
+            levels = model_log_levels(model, np.concatenate([trial, z[k:]]), phi)
         g_all = levels[0]
         if np.all(np.isfinite(g_all)) and gls(y - g_all[rows]) <= before * (1.0 + 1e-12):
             return trial, step, levels
@@ -419,15 +256,15 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
     z = np.asarray(z, float)
     theta = z[:k].copy()
     s = np.log(np.full(3, 0.01))
-    levels = _model_log_levels(model, np.concatenate([theta, z[k:]]), phi)
+    levels = model_log_levels(model, np.concatenate([theta, z[k:]]), phi)
     for _ in range(12):
         g_all, jac_all = levels
         r, g = free.y - g_all[rows], jac_all[rows]
-        s = np.asarray(_fit_sds(jnp.asarray(s), jnp.asarray(mask), r, g, *args))
+        s = np.asarray(fit_sds(jnp.asarray(s), jnp.asarray(mask), r, g, *args))
         s = np.clip(s, math.log(1e-6), math.log(2.0))
         tau2 = mask * np.exp(2.0 * s)
-        _, step = _at(tau2, r, g, args)
-        c = np.asarray(_covariance(tau2, *args))
+        _, step = at_sds(tau2, r, g, args)
+        c = np.asarray(covariance(tau2, *args))
         theta, step, levels = _line_search(model, z, phi, free.y, rows, c, theta, step, r, levels)
         cov = np.linalg.inv(g.T @ np.linalg.solve(c, g))
         if not np.all(np.diag(cov) > 0.0):
@@ -436,12 +273,12 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
             break
     g_all, jac_all = levels  # at theta
     r, g = free.y - g_all[rows], jac_all[rows]
-    c = np.asarray(_covariance(tau2, *args))
+    c = np.asarray(covariance(tau2, *args))
     cov_theta = np.linalg.inv(g.T @ np.linalg.solve(c, g))
     if not (np.all(np.isfinite(cov_theta)) and np.all(np.diag(cov_theta) > 0.0)):
         raise np.linalg.LinAlgError("they do not inform every physical parameter")
-    nll, _ = _at(tau2, r, g, args)
-    nll0, step0 = _at(np.zeros(3), r, g, args)
+    nll, _ = at_sds(tau2, r, g, args)
+    nll0, step0 = at_sds(np.zeros(3), r, g, args)
     n = r.size
     const = 0.5 * n * math.log(2 * math.pi)
 
@@ -460,17 +297,17 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
         # end: the slab's evidence integrates over it
         top = max(5.0 * est, 0.03)
         for _ in range(4):
-            grid = np.linspace(0.0, top, _GRID)
-            t2 = np.tile(tau2, (_GRID, 1))
+            grid = np.linspace(0.0, top, GRID)
+            t2 = np.tile(tau2, (GRID, 1))
             t2[:, j] = grid**2
-            nl = np.asarray(_evaluate(jnp.asarray(t2), r, g, *args, True)[0])
+            nl = np.asarray(evaluate(jnp.asarray(t2), r, g, *args, True)[0])
             if nl[-1] - nl.min() > math.log(1e3):
                 break
             top *= 2.0
         w = _spike_and_slab(grid, np.exp(-(nl - nl.min())))
         cdf = np.cumsum(w)
         lo = float(grid[np.searchsorted(cdf, 0.025)])
-        hi = float(grid[min(int(np.searchsorted(cdf, 0.975)), _GRID - 1)])
+        hi = float(grid[min(int(np.searchsorted(cdf, 0.975)), GRID - 1)])
         sds[p.name] = (est, min(lo, est), max(hi, est))
         grids[p.name] = (grid, w)
 
@@ -550,7 +387,7 @@ def with_variability(result: FitResult) -> FitResult:
     estimates = dict(result.estimates)
     for i, spec in enumerate(model.shared_params[:k]):
         estimates[spec.name] = estimate_of(spec, z[i], se_z[i])
-    g, jac = _model_log_levels(model, z, result.phi)
+    g, jac = model_log_levels(model, z, result.phi)
     fr = np.exp(g[m:])
     fr_se = fr * np.sqrt(np.einsum("ij,jk,ik->i", jac[m:], v.cov_theta, jac[m:]))
     return dataclasses.replace(

@@ -35,6 +35,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from idtool._model._bench import TraceTiming, mean_force_n
+from idtool._model._names import DEFAULT_ACTUATOR
 from idtool._model._params import Param
 from idtool._registry import Registry
 
@@ -51,7 +52,6 @@ __all__ = [
 ]
 
 ACTUATORS: Registry[type[AbstractActuator]] = Registry("actuator model")
-DEFAULT_ACTUATOR = "slope"
 
 CORNER_N = 0.5  # rounding of the slope model's corners [N]; fixed, not identifiable
 # A force counts as settled at its new level once within this fraction of the step.

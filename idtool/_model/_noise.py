@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
+from idtool._model._names import DEFAULT_NOISE
 from idtool._model._params import Param
 from idtool._registry import Registry
 
@@ -47,7 +48,6 @@ __all__ = [
 ]
 
 NOISE_MODELS: Registry[type[AbstractNoise]] = Registry("noise model")
-DEFAULT_NOISE = "ar1"
 
 SIGMA = Param("sigma_n", "N", "log", 1e-6, 1e4, description="innovation scale of the block means")
 PHI = Param("phi", "1", "tanh", -1.0, 1.0, description="AR(1) coefficient of the block means")

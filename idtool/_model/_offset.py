@@ -29,12 +29,12 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from idtool._model._names import DEFAULT_OFFSET
 from idtool._registry import Registry
 
 __all__ = ["DEFAULT_OFFSET", "OFFSETS", "AbstractOffset", "ConstantOffset", "DriftingOffset"]
 
 OFFSETS: Registry[type[AbstractOffset]] = Registry("load-cell offset model")
-DEFAULT_OFFSET = "constant"
 
 # (name, unit, internal scale): the internal value times the scale is the step from the
 # data-driven centre. 0.01 N/s: a drift of 0.01 N/s moves a 12 s trace by 0.12 N, a

@@ -32,7 +32,8 @@ import numpy as np
 
 from idtool._errors import IdtoolError
 from idtool._fit._discrepancy import Conditioning
-from idtool._fit._variability import SD_PARAMS, FreeLevels
+from idtool._fit._free_levels import FreeLevels
+from idtool._fit._variability import SD_PARAMS
 from idtool._model._benchmodel import BenchModel
 from idtool._model._noise import NOISE_MODELS
 from idtool._model._params import Param
@@ -298,7 +299,7 @@ def sample_posterior(
     """Sample the posterior of ``fit``'s shared parameters (module docstring).
 
     Args:
-        fit: a :class:`~idtool._fit._fit.FitResult` or a stored fit (``idtool._fit._store``).
+        fit: a :class:`~idtool._fit._result.FitResult` or a stored fit (``idtool._fit._store``).
         walkers, steps: ensemble size (default 32) and total chain length (a resumed
             chain is continued up to ``steps``).
         seed: seeds the walker starts and emcee's moves (default 0; on resume the

@@ -11,7 +11,7 @@ by ``idtool fit --traces``, or a later session's):
    percentage ``100 (1 - |y - y_hat| / |y - mean(y)|)`` (MATLAB's NRMSE fit: 100 is
    perfect, 0 no better than the trace's mean) and the RMSE [N] of the block means.
 2. **Its friction ratio against the predicted band.** The trace's own FR, estimated
-   from that trace alone (:func:`~idtool._fit._variability.free_levels`, SE from its
+   from that trace alone (:func:`~idtool._fit._free_levels.free_levels`, SE from its
    own noise), against the fit's 95% band for a *new pull* at its operating point
    (:func:`~idtool._predict._predict.predict_friction_ratio`: the curve, the
    discrepancy and the pull-to-pull scatter), widened by the trace's own measurement
@@ -35,7 +35,7 @@ from idtool._data._blocks import prepare_fit_data
 from idtool._data._dataset import Dataset
 from idtool._errors import IdtoolError
 from idtool._fit._fit import run_lm
-from idtool._fit._variability import free_levels
+from idtool._fit._free_levels import free_levels
 from idtool._model._benchmodel import BenchModel, bench_model
 from idtool._predict._predict import Draws, predict_friction_ratio
 

@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from idtool._fit._derived import derived_estimates
-from idtool._fit._fit import Estimate, FitResult
+from idtool._fit._result import Estimate, FitResult
 from idtool._fit._run import FitRun
 from idtool._fit._store import law_state_file
 from idtool._provenance import provenance

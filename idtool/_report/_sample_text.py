@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from idtool._atomic import write_text_atomic
-from idtool._fit._fit import Estimate
+from idtool._fit._result import Estimate
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._posterior._groups import model_check_groups
 from idtool._posterior._levels import (

@@ -42,13 +42,10 @@ from idtool._errors import IdtoolError
 from idtool._model._bench import TraceTiming, dahl_at_load, mean_force_n, on_contact
 from idtool._simulate._noise import ar1_noise, mains_hum, quantise, white_noise
 from idtool._simulate._params import ActuatorParams, BenchParams
+from idtool._simulate._truth import BenchTruth, OperatingPoint, OperatingPointTruth, TraceTruth
 
 __all__ = [
     "TRUTH_FILE",
-    "BenchTruth",
-    "OperatingPoint",
-    "OperatingPointTruth",
-    "TraceTruth",
     "experiment_plan",
     "lag_actuator_force_n",
     "noise_free_force_n",
@@ -73,123 +70,6 @@ _mean_force_n = jax.jit(mean_force_n)
 # traces of nearly equal length (scatter moves every trace's length) share one compilation.
 # The model is elementwise in time, so the padding changes no value.
 _PAD_SAMPLES = 4096
-
-
-@dataclasses.dataclass(frozen=True)
-class OperatingPoint:
-    """One trace of the matrix: its id, load [N], amplitude fraction, ON duration [s]."""
-
-    id: str
-    normal_load_n: float
-    amplitude_fraction: float
-    on_duration_s: float
-
-
-@dataclasses.dataclass(frozen=True)
-class TraceTruth:
-    """What produced one simulated trace.
-
-    Attributes:
-        friction_ratio: this trace's FR = ON level / OFF level, with its pull-to-pull
-            scatter (without scatter, ``operating_point_friction_ratio``).
-        off_force_n, on_force_n: this trace's ``mu N`` and ``FR mu N`` [N], with scatter,
-            without the offset.
-        slip_amplitude_m: effective slip amplitude a from the coupling [m].
-        velocity_ratio: VR = v / (a w) (None without vibration).
-        dimensionless_stiffness: Lambda = Kt a / (mu N), at the nominal mu.
-        load_cell_offset_n: this trace's offset at time 0 [N].
-        startup_s: pull start [s].
-        logged_on_s, horn_on_s: ON window of the logged flag and of the horn [s]
-            (None without ON).
-        mains_phase_rad: phase of the hum.
-        reaches_on_level: whether the force gets down to the ON level before OFF (lag
-            actuator: to within ``LAG_REACH_FRACTION`` of the ON-OFF depth).
-        friction_coefficient: this trace's mu [-], with scatter.
-        operating_point_friction_ratio: FR of the operating point without scatter.
-        offset_drift_n_s: this trace's offset drift rate [N/s]: the offset at time t is
-            ``load_cell_offset_n + offset_drift_n_s * t``.
-        startup_end_s: end of the start-up rise [s]; the steady OFF sliding follows.
-    """
-
-    id: str
-    normal_load_n: float
-    amplitude_fraction: float
-    on_duration_s: float
-    friction_ratio: float
-    off_force_n: float
-    on_force_n: float
-    slip_amplitude_m: float
-    velocity_ratio: float | None
-    dimensionless_stiffness: float
-    load_cell_offset_n: float
-    startup_s: float
-    logged_on_s: tuple[float, float] | None
-    horn_on_s: tuple[float, float] | None
-    mains_phase_rad: float
-    reaches_on_level: bool
-    friction_coefficient: float
-    operating_point_friction_ratio: float
-    offset_drift_n_s: float
-    startup_end_s: float
-
-
-@dataclasses.dataclass(frozen=True)
-class OperatingPointTruth:
-    """The contact model at one operating point, without pull-to-pull scatter.
-
-    Attributes:
-        friction_ratio: FR [-], the median of the traces' FR under scatter (their mean is
-            ``exp(friction_ratio_sd^2 / 2)`` times larger, before the cap at 1): the
-            curve a fit should recover.
-        slip_amplitude_m: effective slip amplitude a [m].
-        velocity_ratio: VR = v / (a w) (None without vibration).
-        dimensionless_stiffness: Lambda = Kt a / (mu N).
-    """
-
-    normal_load_n: float
-    amplitude_fraction: float
-    pull_speed_m_s: float
-    friction_ratio: float
-    slip_amplitude_m: float
-    velocity_ratio: float | None
-    dimensionless_stiffness: float
-
-
-@dataclasses.dataclass(frozen=True)
-class BenchTruth:
-    """The truth behind a simulated dataset (written as ``true_parameters.json``)."""
-
-    seed: int
-    params: BenchParams
-    traces: tuple[TraceTruth, ...]
-    dataset_sha256: str
-    operating_points: tuple[OperatingPointTruth, ...] = ()
-
-    def to_dict(self) -> dict[str, Any]:
-        """The JSON document: the identifiable parameters first, then per operating point
-        and per trace, then all parameters.
-
-        ``coupling_in_fit`` is false for a truth-only coupling law: the fit cannot
-        represent the truth, so its coupling parameters have no true value to cover.
-        """
-        from idtool._version import (
-            __version__,  # here: idtool/__init__ imports this module before defining it
-        )
-
-        contact = self.params.contact
-        return {
-            "seed": self.seed,
-            "idtool_version": __version__,
-            "dataset_sha256": self.dataset_sha256,
-            "friction_law": contact.friction_law,
-            "friction_coefficient": contact.friction_coefficient,
-            "contact_stiffness_n_m": contact.contact_stiffness_n_m,
-            "coupling": self.params.to_dict()["coupling"],
-            "coupling_in_fit": self.params.coupling.in_fit,
-            "operating_points": [dataclasses.asdict(o) for o in self.operating_points],
-            "traces": [dataclasses.asdict(t) for t in self.traces],
-            "params": self.params.to_dict(),
-        }
 
 
 def experiment_plan(params: BenchParams) -> tuple[OperatingPoint, ...]:

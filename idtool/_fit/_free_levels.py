@@ -1,0 +1,131 @@
+"""Every trace's own OFF and ON levels, fitted freely: stage 1 of the levels model.
+
+The hierarchical model of the levels (:mod:`idtool._fit._variability`) works on a
+summary of the traces: every trace's OFF and ON levels fitted freely, with the bench
+nuisances (offsets, pull starts, horn lags, actuator slopes), on the same AR(1)-whitened
+block means as the fit. Their estimates ``y`` (log OFF, log FR) and covariance ``V``
+summarise what the traces say about the levels; the bench model is linear in the levels,
+so this summary loses nothing to first order. An ON window too short for the force to
+settle (``MIN_AT_LEVEL_S``) does not measure its ON level: that trace's FR is left out
+(its OFF level stays). Everything here reuses the fit's own linearisation (no new
+program to compile).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import jax.numpy as jnp
+import numpy as np
+
+from idtool._fit._fit import run_lm
+from idtool._model._benchmodel import BenchModel
+
+__all__ = ["MIN_AT_LEVEL_S", "FreeLevels", "free_levels", "model_log_levels"]
+
+# An ON level counts as measured when the force sits at it for this long (about four
+# 40 ms blocks): shorter, the trace only bounds it (its depth is beyond the slope's reach).
+MIN_AT_LEVEL_S = 0.15
+
+
+@dataclasses.dataclass(frozen=True)
+class FreeLevels:
+    """Every trace's OFF and ON level fitted freely (module docstring).
+
+    ``y`` holds log OFF for every trace, then log FR for the traces in ``measured``;
+    ``cov_y`` its covariance (AR(1) noise, nuisances and shared slopes integrated).
+    """
+
+    off_n: np.ndarray
+    on_n: np.ndarray
+    measured: np.ndarray  # (traces,) the ON level is reached and measured
+    y: np.ndarray
+    cov_y: np.ndarray
+    sigma_n: float
+
+    @property
+    def friction_ratio(self) -> np.ndarray:
+        """Each trace's own FR (NaN where its ON level is not measured)."""
+        return np.where(self.measured, self.on_n / self.off_n, np.nan)
+
+    @property
+    def friction_ratio_se(self) -> np.ndarray:
+        m = self.off_n.size
+        se = np.full(m, np.nan)
+        k = np.flatnonzero(self.measured)
+        se_log = np.sqrt(np.diag(self.cov_y)[m:])
+        se[k] = self.friction_ratio[k] * se_log
+        return se
+
+
+def _at_level_s(model: BenchModel, z: np.ndarray, levels: np.ndarray) -> np.ndarray:
+    """Per trace: how long the force sits at its ON level [s] (-inf without ON), from
+    the levels ``(OFF, ON)`` [N] at ``z``."""
+    d = model.data
+    v = model.values(jnp.asarray(z))
+    off, on = np.split(levels, 2)
+    start = np.asarray(d.on_start_s) + np.asarray(v["delay_on_s"])
+    end = np.asarray(d.on_end_s) + np.asarray(v["delay_off_s"])
+    with np.errstate(invalid="ignore"):
+        length = np.where(np.isfinite(start) & np.isfinite(end), end - start, -np.inf)
+    settle = np.asarray(model.actuator_of(v).settle_time_s(off - on))
+    return length - settle
+
+
+def _linearise(model: BenchModel, z: np.ndarray, phi: float):
+    """The fit's own linearisation at ``z`` (no new program to compile): the whitened
+    residuals, the levels ``(OFF, ON)``, their Jacobian in the physical parameters and
+    the normal equations in ``u = (OFF, ON, z[k:])``."""
+    out = run_lm(model, jnp.asarray(z), jnp.ones(z.size, bool), phi, 0)
+    return (np.asarray(out.residuals), *(np.asarray(x) for x in out.aux))
+
+
+def free_levels(model: BenchModel, z: np.ndarray, phi: float) -> FreeLevels:
+    """The traces' own levels, from the fit ``z`` (module docstring).
+
+    One Gauss-Newton step in ``u`` from the fit's optimum: the block means are linear
+    in the levels wherever the force sits at them, so the step lands on the free
+    optimum up to the nuisances' second-order terms (on the example, Levenberg-Marquardt
+    run to convergence in ``u`` moved the free FRs by ~1e-4, a twentieth of their
+    standard errors; measured while this was written, not a test).
+    """
+    k, m = model.n_physical, model.data.n_traces
+    w, lv, _, jtj_u, jtr_u = _linearise(model, z, phi)
+    measured = _at_level_s(model, z, lv) >= MIN_AT_LEVEL_S
+    u = np.concatenate([lv, z[k:]])
+    free = np.flatnonzero(np.concatenate([np.ones(m, bool), measured, np.ones(z.size - k, bool)]))
+    jtj = jtj_u[np.ix_(free, free)]
+    step = np.linalg.solve(jtj, jtr_u[free])
+    u[free] -= step
+    # the residual sum of squares at the free optimum, to second order
+    rss = float(w @ w) - float(jtr_u[free] @ step)
+    sigma2 = rss / (w.size - free.size)
+    cov_u = np.zeros((u.size, u.size))
+    cov_u[np.ix_(free, free)] = sigma2 * np.linalg.inv(jtj)
+    # y = (log OFF, log ON - log OFF for the measured); its Jacobian in u
+    idx = np.flatnonzero(measured)
+    dy = np.zeros((m + idx.size, u.size))
+    dy[np.arange(m), np.arange(m)] = 1.0 / u[:m]
+    dy[m + np.arange(idx.size), m + idx] = 1.0 / u[m + idx]
+    dy[m + np.arange(idx.size), idx] = -1.0 / u[idx]
+    y = np.concatenate([np.log(u[:m]), np.log(u[m + idx] / u[idx])])
+    return FreeLevels(
+        off_n=u[:m],
+        on_n=u[m : 2 * m],
+        measured=measured,
+        y=y,
+        cov_y=dy @ cov_u @ dy.T,
+        sigma_n=math.sqrt(sigma2),
+    )
+
+
+def model_log_levels(model: BenchModel, z: np.ndarray, phi: float):
+    """log OFF and log FR per trace at ``z`` and their Jacobian in the physical
+    parameters: (2 traces,), (2 traces, k)."""
+    _, lv, dlv, _, _ = _linearise(model, z, phi)
+    m = lv.size // 2
+    off, on = lv[:m], lv[m:]
+    g = np.concatenate([np.log(off), np.log(on / off)])
+    jac = np.concatenate([dlv[:m] / off[:, None], dlv[m:] / on[:, None] - dlv[:m] / off[:, None]])
+    return g, jac

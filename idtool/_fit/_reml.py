@@ -1,0 +1,70 @@
+"""The levels model's likelihood in its three sds (REML), for :mod:`idtool._fit._variability`.
+
+The free levels' residuals ``r`` against the physical model, linearised as ``g`` in its
+parameters, are ``N(0, V + Sigma(sds))``: ``V`` the free levels' covariance, ``Sigma``
+the trace scatter (OFF rows, FR rows) and the operating-point discrepancy's correlation
+``zz`` between FR rows. Theta is profiled by its generalised least-squares step; the
+restricted likelihood adds ``log det(g' C^-1 g)`` (REML: the sds' estimate then does
+not shrink with the parameters fitted, Patterson & Thompson 1971). Pure and jittable.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jax.scipy.linalg import cho_solve
+
+__all__ = ["GRID", "at_sds", "covariance", "evaluate", "fit_sds", "neg_log_lik"]
+
+GRID = 241  # points of each sd's grid (REML likelihood times the spike-and-slab prior)
+
+
+def covariance(tau2, v, kinds, zz):
+    """``V + Sigma(sds)``: ``kinds`` (n, 2) one-hot OFF / FR rows, ``zz`` the
+    discrepancy's correlation between the FR rows (0 in the OFF rows)."""
+    diag = kinds[:, 0] * tau2[0] + kinds[:, 1] * tau2[1]
+    return v + jnp.diag(diag) + tau2[2] * zz
+
+
+def neg_log_lik(tau2, r, g, v, kinds, zz, restricted):
+    """-log of the (restricted) likelihood of the level residuals ``r`` (theta profiled
+    on the linearised model ``g``), up to a constant; and theta's Gauss-Newton step."""
+    c = covariance(tau2, v, kinds, zz)
+    chol = jnp.linalg.cholesky(c)
+    ci_r = cho_solve((chol, True), r)
+    ci_g = cho_solve((chol, True), g)
+    a = g.T @ ci_g
+    step = jnp.linalg.solve(a, g.T @ ci_r)
+    rt = r - g @ step
+    quad = rt @ cho_solve((chol, True), rt)
+    logdet_c = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol)))
+    logdet_a = jnp.linalg.slogdet(a)[1]
+    return 0.5 * (quad + logdet_c + jnp.where(restricted, logdet_a, 0.0)), step
+
+
+@jax.jit
+def fit_sds(s0, free, r, g, v, kinds, zz):
+    """REML log sds (optimistix BFGS); the sds outside ``free`` stay 0."""
+
+    def loss(s, _):
+        return neg_log_lik(free * jnp.exp(2.0 * s), r, g, v, kinds, zz, True)[0]
+
+    sol: optx.Solution = optx.minimise(
+        loss, optx.BFGS(rtol=1e-8, atol=1e-8), s0, max_steps=200, throw=False
+    )
+    return sol.value
+
+
+@jax.jit
+def evaluate(tau2_rows, r, g, v, kinds, zz, restricted):
+    """-log (restricted) likelihood and theta's step at every row of ``tau2_rows``
+    (rows, 3): one program for the profiles and the steps."""
+    return jax.vmap(lambda t: neg_log_lik(t, r, g, v, kinds, zz, restricted))(tau2_rows)
+
+
+def at_sds(tau2, r, g, args, restricted=False):
+    """:func:`evaluate` at one ``tau2`` (padded to the grid's shape: one program)."""
+    nll, step = evaluate(jnp.tile(jnp.asarray(tau2), (GRID, 1)), r, g, *args, restricted)
+    return float(nll[0]), np.asarray(step[0])

@@ -1,0 +1,117 @@
+"""What a fit found: each parameter's :class:`Estimate` and the whole :class:`FitResult`
+(``model`` and ``z`` reproduce every prediction); :func:`estimate_of` maps an internal
+value and its standard error to the physical scale (delta method, interval through the
+transform)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import TYPE_CHECKING
+
+import jax.numpy as jnp
+import numpy as np
+
+from idtool._model._benchmodel import BenchModel
+from idtool._model._params import Param
+
+if TYPE_CHECKING:
+    from idtool._fit._variability import Variability
+
+__all__ = ["Z95", "Z_AT_BOUND", "Estimate", "FitResult", "estimate_of"]
+
+Z95 = 1.959963984540054
+# Internal scale: a bounded parameter beyond this sits at its bound (sigmoid > 0.999).
+Z_AT_BOUND = 7.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Estimate:
+    """A parameter's estimate, standard error and 95% interval, in its unit."""
+
+    name: str
+    unit: str
+    estimate: float
+    std_error: float
+    ci95: tuple[float, float]
+    at_bound: bool = False
+    fixed: bool = False  # fixed (--fix, a parameter table, the rig): not estimated
+    fixed_label: str = ""  # who fixed it, for reports ("fixed by the user", ...)
+
+
+@dataclasses.dataclass(frozen=True)
+class FitResult:
+    """Everything one fit found; ``model`` and ``z`` reproduce every prediction."""
+
+    model: BenchModel
+    z: np.ndarray
+    cov_z: np.ndarray
+    phi: float
+    sigma_n: float
+    rss: float
+    loglik: float
+    estimates: dict[str, Estimate]
+    correlation: np.ndarray
+    friction_ratio: np.ndarray
+    friction_ratio_se: np.ndarray
+    optima: list[dict]
+    warnings: list[str]
+    lm_steps: int
+    jacobian_evaluations: int  # linearisations: residuals plus one JVP per colour
+    # the levels model's scatter and discrepancy (issue 10), when it is on
+    variability: Variability | None = None
+    # what the data let the fit measure, for the report (not doubts: those are warnings)
+    notes: list[str] = dataclasses.field(default_factory=list)
+
+    @property
+    def sd_grids(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """The scatter and discrepancy sds' posterior grids (REML likelihood times the
+        spike-and-slab prior; empty when off)."""
+        return dict(self.variability.grids) if self.variability is not None else {}
+
+    @property
+    def levels(self):
+        """(free levels, sds) of the levels model, or None when it is off."""
+        if self.variability is None:
+            return None
+        return self.variability.free, dict(self.variability.sds)
+
+    @property
+    def conditioning(self):
+        """What predictions condition the discrepancy on (the traces' own friction
+        ratios, :mod:`idtool._fit._discrepancy`), or None when the levels model is off."""
+        from idtool._fit._variability import discrepancy_conditioning
+
+        levels = self.levels
+        return None if levels is None else discrepancy_conditioning(self.model, levels[0])
+
+    @property
+    def n_data(self) -> int:
+        return self.model.data.n_blocks
+
+    @property
+    def n_params(self) -> int:
+        return int(self.z.size) + len(self.model.noise.params)  # + sigma (and phi)
+
+    @property
+    def aic(self) -> float:
+        return 2 * self.n_params - 2 * self.loglik
+
+    @property
+    def bic(self) -> float:
+        return self.n_params * math.log(self.n_data) - 2 * self.loglik
+
+
+def estimate_of(spec: Param, z: float, se_z: float) -> Estimate:
+    """A parameter's estimate from its internal value ``z`` and standard error there:
+    the error mapped by the transform's slope (delta method), the 95% interval through
+    the transform itself (so it respects the bounds)."""
+    value = float(spec.value(jnp.asarray(z)))
+    se = abs(float(spec.slope(z))) * float(se_z)
+    if spec.bounded:
+        lo = float(spec.value(jnp.asarray(z - Z95 * se_z)))
+        hi = float(spec.value(jnp.asarray(z + Z95 * se_z)))
+        at_bound = abs(z) > Z_AT_BOUND
+    else:
+        lo, hi, at_bound = value - Z95 * se, value + Z95 * se, False
+    return Estimate(spec.name, spec.unit, value, se, (lo, hi), at_bound)
