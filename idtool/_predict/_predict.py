@@ -216,7 +216,14 @@ def draws_from_covariance(
     fit's sd grids ``sd_grids``; the discrepancy conditioned on ``conditioning``."""
     k = model.n_physical
     rng = np.random.default_rng(seed)
-    draws = rng.multivariate_normal(z[:k], cov_z[:k, :k], size=max_draws, method="eigh")
+    cov = 0.5 * (cov_z[:k, :k] + cov_z[:k, :k].T)
+    s, v = np.linalg.eigh(cov)
+    if s.min() < 0.0:
+        # A degenerate fit (a parameter at its bound, a direction the data do not
+        # inform: the fit warns of both) leaves round-off below zero in the
+        # pseudo-inverse's spectrum; those directions get no spread.
+        cov = (v * np.clip(s, 0.0, None)) @ v.T
+    draws = rng.multivariate_normal(z[:k], cov, size=max_draws, method="eigh", check_valid="ignore")
     values = {
         p.name: np.asarray(p.value(jnp.asarray(draws[:, i])))
         for i, p in enumerate(model.shared_params[:k])
