@@ -40,6 +40,7 @@ from idtool._data._schema import (
     load_schema,
     trace_columns,
 )
+from idtool._data._table_read import parquet_column
 from idtool._errors import IdtoolError
 
 
@@ -181,6 +182,26 @@ def test_parquet_nulls_and_types_are_located(tmp_path):
     assert "a.parquet, row 5, column 'force_n': empty cell" in text
     assert "a.parquet, row 11, column 'ultrasound_on'" in text
     assert "column 'stamp'" in text  # an unknown column is only a warning
+
+
+@pytest.mark.parametrize(
+    "kind", [pa.float64(), pa.float32(), pa.int16(), pa.uint8(), pa.int64(), pa.bool_()]
+)
+def test_parquet_columns_read_from_their_buffers_match_pyarrow(kind):
+    """The fast path (no nulls: the data buffers read directly, without pyarrow's
+    pandas-importing conversions) gives pyarrow's own values, for chunked and sliced
+    columns (chunks with an offset into their buffers)."""
+    rng = np.random.default_rng(0)
+    if pa.types.is_boolean(kind):
+        values = rng.random(203) < 0.5
+    else:
+        values = (rng.random(203) * 100).astype(kind.to_pandas_dtype())
+    whole = pa.array(values, kind)
+    column = pa.chunked_array([whole.slice(3, 50), whole.slice(61, 77), whole.slice(150)])
+    expected = np.concatenate([c.to_numpy(zero_copy_only=False) for c in column.chunks])
+    raw = parquet_column(column)
+    np.testing.assert_array_equal(raw.numbers, expected.astype(float))
+    assert not raw.null.any()
 
 
 @pytest.mark.parametrize(

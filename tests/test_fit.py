@@ -14,6 +14,7 @@ from scipy.integrate import solve_ivp
 
 import idtool
 from idtool._cli._main import main
+from idtool._fit._fit import prediction_at
 from idtool._fit._run import fit_dataset
 from idtool._model._benchmodel import bench_model
 
@@ -67,6 +68,17 @@ def test_whitened_residuals_are_not_autocorrelated(example_run):
     lag1 = np.sum(w[1:] * w[:-1]) / np.sum(w * w)
     assert abs(lag1) < 0.1  # the AR(1) model took out the correlation (raw: ~0.5-0.8)
     assert 0.2 < r.phi < 0.95
+
+
+def test_prediction_from_the_fits_program_is_the_models(example_run):
+    """The figures' prediction and whitened residuals come from the fit's compiled
+    program run for no step and the residuals un-whitened; they must be the model's
+    own ``predict`` and ``residuals`` (to round-off of the AR(1) recursion)."""
+    r = example_run.chosen
+    pred, w = prediction_at(r.model, r.z, r.phi)
+    np.testing.assert_allclose(pred, np.asarray(r.model.predict(jnp.asarray(r.z))), atol=1e-9)
+    want = np.asarray(r.model.residuals(jnp.asarray(r.z), r.phi))
+    np.testing.assert_allclose(w, want, atol=1e-9)
 
 
 def test_short_on_windows_that_never_reach_the_on_level():

@@ -24,6 +24,7 @@ from idtool._errors import IdtoolError, Problem
 
 __all__ = [
     "BlockLayout",
+    "DataLabels",
     "FitData",
     "StartValues",
     "block_layout",
@@ -47,8 +48,9 @@ class FitData(eqx.Module):
 
     Arrays indexed by trace have length ``n_traces``; by block, ``n_blocks``.
     ``on_start_s`` / ``on_end_s`` are the logged ON window (``inf`` for none).
-    A pytree: the arrays are its leaves (so one compiled program serves every dataset
-    of the same shape), the names and block layout are static.
+    A pytree: the arrays are its leaves and the block layout is static, so one compiled
+    program serves every dataset of the same shape; the names and notes are
+    :class:`DataLabels` (static, but equal for every dataset).
     ``op_*`` are the distinct operating points (load [N], amplitude fraction, speed
     [m/s]) and ``op_index`` each trace's row among them: repeated traces share one
     contact solve.
@@ -62,17 +64,11 @@ class FitData(eqx.Module):
     keeps (0 for whole periods); ``notes`` are plain sentences for the fit report.
     """
 
-    name: str = eqx.field(static=True)
-    sha256: str = eqx.field(static=True)
-    trace_ids: tuple[str, ...] = eqx.field(static=True)
+    labels: DataLabels = eqx.field(static=True)
     block_size: int = eqx.field(static=True)
     block_s: float = eqx.field(static=True)
     mains_hz: float = eqx.field(static=True)
     periods_per_block: int = eqx.field(static=True)
-    periods_requested: int = eqx.field(static=True)
-    mains_source: str = eqx.field(static=True)
-    residual_hum_fraction: float = eqx.field(static=True)
-    notes: tuple[str, ...] = eqx.field(static=True)
     normal_load_n: np.ndarray
     amplitude_fraction: np.ndarray
     pull_speed_m_s: np.ndarray
@@ -94,12 +90,67 @@ class FitData(eqx.Module):
     transducer: TransducerSpec | None = eqx.field(static=True, default=None)
 
     @property
+    def name(self) -> str:
+        return self.labels.name
+
+    @property
+    def sha256(self) -> str:
+        return self.labels.sha256
+
+    @property
+    def trace_ids(self) -> tuple[str, ...]:
+        return self.labels.trace_ids
+
+    @property
+    def periods_requested(self) -> int:
+        return self.labels.periods_requested
+
+    @property
+    def mains_source(self) -> str:
+        return self.labels.mains_source
+
+    @property
+    def residual_hum_fraction(self) -> float:
+        return self.labels.residual_hum_fraction
+
+    @property
+    def notes(self) -> tuple[str, ...]:
+        return self.labels.notes
+
+    @property
     def n_traces(self) -> int:
-        return len(self.trace_ids)
+        return self.normal_load_n.shape[0]
 
     @property
     def n_blocks(self) -> int:
         return int(self.force_n.size)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class DataLabels:
+    """What a dataset is called and what the fit report says of its blocks: nothing
+    the model computes with.
+
+    Every ``DataLabels`` compares equal to every other and hashes alike. JAX's caches
+    key a jitted call on its arguments' static fields, so with the names static a
+    second dataset of the same shape (the next bench, the next seed of a study) was
+    traced, lowered and compiled again (~1.7 s a Levenberg-Marquardt program); with
+    them here, its programs are the first one's.
+    """
+
+    name: str
+    sha256: str
+    trace_ids: tuple[str, ...]
+    periods_requested: int
+    mains_source: str
+    residual_hum_fraction: float
+    notes: tuple[str, ...]
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, DataLabels)
+
+    def __hash__(self) -> int:
+        return 0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -284,10 +335,17 @@ def prepare_fit_data(
     first[first_block] = True
     ops = np.stack([loads, alphas, speeds], axis=1).astype(float)
     unique, op_index = np.unique(ops, axis=0, return_inverse=True)
-    return FitData(
+    labels = DataLabels(
         name=dataset.name,
         sha256=dataset.sha256,
         trace_ids=tuple(tr.id for tr in dataset.traces),
+        periods_requested=periods_per_block,
+        mains_source=mains_source,
+        residual_hum_fraction=layout.residual_hum_fraction,
+        notes=tuple(n for n in [_layout_note(layout, mains_hz, periods_per_block)] if n),
+    )
+    return FitData(
+        labels=labels,
         normal_load_n=np.array(loads, float),
         amplitude_fraction=np.array(alphas, float),
         pull_speed_m_s=np.array(speeds, float),
@@ -311,10 +369,6 @@ def prepare_fit_data(
         block_s=float(f"{block_durations[0]:.12g}"),
         mains_hz=float(mains_hz),
         periods_per_block=layout.periods,
-        periods_requested=periods_per_block,
-        mains_source=mains_source,
-        residual_hum_fraction=layout.residual_hum_fraction,
-        notes=tuple(n for n in [_layout_note(layout, mains_hz, periods_per_block)] if n),
         transducer=dataset.rig.transducer,
     )
 

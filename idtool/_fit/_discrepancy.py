@@ -40,6 +40,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from idtool._data._blocks import FitData
+from idtool._model._xp import xp
 
 __all__ = [
     "SCALE_FLOORS",
@@ -59,9 +60,11 @@ NUGGET_FRACTION = 0.1
 
 def operating_coordinates(load_n: ArrayLike, alpha: ArrayLike, speed_m_s: ArrayLike) -> Array:
     """``(ln N, alpha, ln v)`` of operating points, (..., 3): loads [N] and speeds
-    [m/s] on log scales (the model's response is multiplicative in both)."""
-    return jnp.stack(
-        [jnp.log(jnp.asarray(load_n)), jnp.asarray(alpha), jnp.log(jnp.asarray(speed_m_s))],
+    [m/s] on log scales (the model's response is multiplicative in both). NumPy on
+    NumPy input, JAX on JAX input (:mod:`idtool._model._xp`)."""
+    x = xp(load_n, alpha, speed_m_s)
+    return x.stack(
+        [x.log(x.asarray(load_n)), x.asarray(alpha), x.log(x.asarray(speed_m_s))],
         axis=-1,
     )
 
@@ -76,10 +79,12 @@ def length_scales(data: FitData) -> np.ndarray:
 def correlation(
     xa: Float[ArrayLike, "a 3"], xb: Float[ArrayLike, "b 3"], scales: Float[ArrayLike, " 3"]
 ) -> Float[Array, "a b"]:
-    """The discrepancy's correlation between operating points (module docstring)."""
-    diff = (jnp.asarray(xa)[:, None, :] - jnp.asarray(xb)[None, :, :]) / jnp.asarray(scales)
-    smooth = jnp.exp(-0.5 * jnp.sum(diff**2, axis=-1))
-    same = jnp.all(jnp.abs(diff) < 1e-9, axis=-1)
+    """The discrepancy's correlation between operating points (module docstring); NumPy
+    or JAX by argument."""
+    x = xp(xa, xb, scales)
+    diff = (x.asarray(xa)[:, None, :] - x.asarray(xb)[None, :, :]) / x.asarray(scales)
+    smooth = x.exp(-0.5 * x.sum(diff**2, axis=-1))
+    same = x.all(x.abs(diff) < 1e-9, axis=-1)
     return (1.0 - NUGGET_FRACTION) * smooth + NUGGET_FRACTION * same
 
 

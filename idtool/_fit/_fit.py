@@ -25,7 +25,6 @@ import functools
 import math
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from idtool._data._blocks import FitData
@@ -39,6 +38,8 @@ from idtool._model._settings import ParameterSetting
 
 __all__ = [
     "fit_model",
+    "lm_program",
+    "prediction_at",
     "quasi_random",
     "run_lm",
 ]
@@ -48,8 +49,10 @@ __all__ = [
 _MULTISTART_STEPS = 20
 _POLISH_STEPS = 100
 # XLA's newer CPU fusion emitters compile the fit's programs ~30% slower for the same
-# run time (2.6 s vs 1.9 s for the LM loop on the example; benchmarks/bench_fit.py).
-_COMPILE = {"xla_cpu_use_fusion_emitters": False}
+# run time (2.6 s vs 1.9 s for the LM loop on the example; benchmarks/bench_fit.py);
+# LLVM's optimisation level 1 instead of 2 compiles it in 1.19 s instead of 1.35 s and
+# runs 20 steps in 83 ms as before (level 0: 0.58 s, but 235 ms).
+_COMPILE = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 1}
 
 
 @functools.partial(jax.jit, compiler_options=_COMPILE)
@@ -60,6 +63,22 @@ def run_lm(model: BenchModel, z0, mask, phi, max_steps) -> LMResult:
     compiled program serves every start, polish, AR(1) round, profile point and every
     dataset of the same shape and laws."""
     return levenberg_marquardt(model.normal_equations, z0, phi, mask, max_steps)
+
+
+def lm_program(model: BenchModel) -> tuple:
+    """:func:`run_lm` and arguments of the types its calls for ``model`` take (for
+    compiling ahead: :class:`~idtool._fit._prefetch.CompileAhead`)."""
+    z = np.asarray(model.z0(), float)
+    return run_lm, (model, z, np.ones(z.size, bool), 0.0, 0)
+
+
+def prediction_at(model: BenchModel, z: np.ndarray, phi: float) -> tuple[np.ndarray, np.ndarray]:
+    """The model's block means [N] at ``z`` and their AR(1)-whitened residuals, from the
+    fit's own compiled program run for no step (no program of their own to trace,
+    compile or load: 0.4 s of a repeated fit's figures)."""
+    out = run_lm(model, np.asarray(z, float), np.ones(np.size(z), bool), phi, 0)
+    w = np.asarray(out.residuals)
+    return np.asarray(model.data.force_n) + _unwhiten(w, phi, model.data), w
 
 
 def _unwhiten(w: np.ndarray, phi: float, data: FitData) -> np.ndarray:
@@ -104,6 +123,12 @@ def _distinct(points: list[dict], rel: float = 1e-6, near: float = 0.05) -> list
     return groups
 
 
+@jax.jit
+def _amplitude_m(coupling, alpha, load_n, max_amplitude_m):
+    """A coupling law's slip amplitude [m] (one program, not an eager operation each)."""
+    return coupling.amplitude_m(alpha, load_n, max_amplitude_m)
+
+
 def _start_point(model: BenchModel, u: np.ndarray) -> dict[str, float]:
     """Physical start values from a point ``u`` of the unit cube (one coordinate per
     physical parameter).
@@ -132,10 +157,8 @@ def _start_point(model: BenchModel, u: np.ndarray) -> dict[str, float]:
     amplitude = float(d.pull_speed_m_s[ref]) / ((0.05 + 0.9 * u[j]) * w)
     # The coupling with unit gain and its other parameters at their start values (the
     # fixed ones at theirs); its friction-free amplitude is proportional to the gain.
-    unit = model.coupling_of(
-        {p.name: jnp.asarray(start.get(p.name, p.start)) for p in specs} | {gain: jnp.asarray(1.0)}
-    )
-    per_gain = float(unit.amplitude_m(alphas[ref], loads[ref], d.max_amplitude_m))
+    unit = model.coupling_of({p.name: start.get(p.name, p.start) for p in specs} | {gain: 1.0})
+    per_gain = float(_amplitude_m(unit, alphas[ref], loads[ref], d.max_amplitude_m))
     spec = specs[j]
     start[gain] = float(np.clip(amplitude / per_gain, 1.01 * spec.lo, 0.99 * spec.hi))
     return start
@@ -184,11 +207,11 @@ def fit_model(
     model = bench_model(data, law, coupling, noise, actuator, offset, settings)
     k = model.n_physical
     base = model.z0()
-    everything = jnp.ones(base.size, bool)
+    everything = np.ones(base.size, bool)
     count = {"steps": 0, "jacobians": 0}
 
     def run(z, mask, phi, max_steps):
-        out = run_lm(model, jnp.asarray(z), mask, phi, max_steps)
+        out = run_lm(model, np.asarray(z, float), mask, phi, max_steps)
         count["steps"] += int(out.steps)
         count["jacobians"] += int(out.n_jacobians)
         return out
@@ -253,7 +276,7 @@ def _settle_phi(model: BenchModel, best: LMResult, phi: float, run) -> tuple[LMR
     """Refit on AR(1)-whitened residuals (autoregressive noise) until phi settles, from
     ``best`` fitted with ``phi``; the last fit and the phi it was fitted with."""
     data = model.data
-    everything = jnp.ones(best.z.size, bool)
+    everything = np.ones(best.z.size, bool)
     for _ in range(3 if model.noise.autoregressive else 0):
         e = _unwhiten(np.asarray(best.residuals), phi, data)
         new_phi = model.noise.estimate_phi(e, data.first)

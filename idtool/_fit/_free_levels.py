@@ -16,7 +16,6 @@ from __future__ import annotations
 import dataclasses
 import math
 
-import jax.numpy as jnp
 import numpy as np
 
 from idtool._fit._fit import run_lm
@@ -63,13 +62,13 @@ def _at_level_s(model: BenchModel, z: np.ndarray, levels: np.ndarray) -> np.ndar
     """Per trace: how long the force sits at its ON level [s] (-inf without ON), from
     the levels ``(OFF, ON)`` [N] at ``z``."""
     d = model.data
-    v = model.values(jnp.asarray(z))
+    v = model.values(np.asarray(z, float))
     off, on = np.split(levels, 2)
     start = np.asarray(d.on_start_s) + np.asarray(v["delay_on_s"])
     end = np.asarray(d.on_end_s) + np.asarray(v["delay_off_s"])
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore"):  # traces without ON: -inf
         length = np.where(np.isfinite(start) & np.isfinite(end), end - start, -np.inf)
-    settle = np.asarray(model.actuator_of(v).settle_time_s(off - on))
+        settle = np.asarray(model.actuator_of(v).settle_time_s(off - on))
     return length - settle
 
 
@@ -77,7 +76,7 @@ def _linearise(model: BenchModel, z: np.ndarray, phi: float):
     """The fit's own linearisation at ``z`` (no new program to compile): the whitened
     residuals, the levels ``(OFF, ON)``, their Jacobian in the physical parameters and
     the normal equations in ``u = (OFF, ON, z[k:])``."""
-    out = run_lm(model, jnp.asarray(z), jnp.ones(z.size, bool), phi, 0)
+    out = run_lm(model, np.asarray(z, float), np.ones(z.size, bool), phi, 0)
     return (np.asarray(out.residuals), *(np.asarray(x) for x in out.aux))
 
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import dataclasses
 
-import jax.numpy as jnp
 import numpy as np
 
 from idtool._fit._fit import run_lm
@@ -41,9 +40,10 @@ def refit_with_fixed(
     Returns the rise of ``-2 log L`` over the optimum, ``(RSS - RSS_min) / sigma^2``,
     and the refitted vector (a warm start for the next point of a profile).
     """
-    z = jnp.asarray(result.z if z_start is None else z_start)
-    mask = jnp.ones(z.size, bool).at[i].set(False)
-    out = run_lm(result.model, z.at[i].set(zi), mask, result.phi, 100)
+    z = np.array(result.z if z_start is None else z_start, float)
+    mask = np.ones(z.size, bool)
+    mask[i], z[i] = False, zi
+    out = run_lm(result.model, z, mask, result.phi, 100)
     sigma2 = result.rss / (result.n_data - result.z.size)
     return (2.0 * float(out.loss) - result.rss) / sigma2, np.asarray(out.z)
 
@@ -83,7 +83,7 @@ def check_intervals(result: FitResult) -> FitResult:
             rise = refit_with_fixed(result, i, zi)[0] if abs(zi) < Z_AT_BOUND else _CHI2_95
             if rise < _TOO_FLAT:
                 z_end = _profile_end(result, i, side, se)
-                value = float(spec.value(jnp.asarray(z_end)))
+                value = float(spec.value(float(z_end)))
             ends.append((value, rise))
         if all(rise >= _TOO_FLAT for _, rise in ends):
             continue
@@ -126,7 +126,7 @@ def profile_parameter(result: FitResult, name: str, n_points: int = 9) -> Profil
         z = None
         for j in order:
             delta[j], z = refit_with_fixed(result, i, grid[j], z)
-    values = [float(model.params[i].value(jnp.asarray(zi))) for zi in grid]
+    values = [float(model.params[i].value(float(zi))) for zi in grid]
     v, d = np.array(values), delta
     return Profile(name, v, d, profile_interval(v, d))
 

@@ -16,6 +16,8 @@ import numpy as np
 import optimistix as optx
 from jax.scipy.linalg import cho_solve
 
+from idtool._model._xp import xp
+
 __all__ = ["GRID", "at_sds", "covariance", "evaluate", "fit_sds", "neg_log_lik"]
 
 GRID = 241  # points of each sd's grid (REML likelihood times the spike-and-slab prior)
@@ -23,9 +25,10 @@ GRID = 241  # points of each sd's grid (REML likelihood times the spike-and-slab
 
 def covariance(tau2, v, kinds, zz):
     """``V + Sigma(sds)``: ``kinds`` (n, 2) one-hot OFF / FR rows, ``zz`` the
-    discrepancy's correlation between the FR rows (0 in the OFF rows)."""
+    discrepancy's correlation between the FR rows (0 in the OFF rows). NumPy or JAX
+    by argument."""
     diag = kinds[:, 0] * tau2[0] + kinds[:, 1] * tau2[1]
-    return v + jnp.diag(diag) + tau2[2] * zz
+    return v + xp(tau2, v, kinds, zz).diag(diag) + tau2[2] * zz
 
 
 def neg_log_lik(tau2, r, g, v, kinds, zz, restricted):
@@ -66,5 +69,5 @@ def evaluate(tau2_rows, r, g, v, kinds, zz, restricted):
 
 def at_sds(tau2, r, g, args, restricted=False):
     """:func:`evaluate` at one ``tau2`` (padded to the grid's shape: one program)."""
-    nll, step = evaluate(jnp.tile(jnp.asarray(tau2), (GRID, 1)), r, g, *args, restricted)
-    return float(nll[0]), np.asarray(step[0])
+    nll, step = evaluate(np.tile(np.asarray(tau2, float), (GRID, 1)), r, g, *args, restricted)
+    return float(np.asarray(nll)[0]), np.asarray(step)[0]

@@ -9,7 +9,6 @@ import dataclasses
 import math
 from typing import TYPE_CHECKING
 
-import jax.numpy as jnp
 import numpy as np
 
 from idtool._model._benchmodel import BenchModel
@@ -106,11 +105,11 @@ def estimate_of(spec: Param, z: float, se_z: float) -> Estimate:
     """A parameter's estimate from its internal value ``z`` and standard error there:
     the error mapped by the transform's slope (delta method), the 95% interval through
     the transform itself (so it respects the bounds)."""
-    value = float(spec.value(jnp.asarray(z)))
+    value = float(spec.value(float(z)))
     se = abs(float(spec.slope(z))) * float(se_z)
     if spec.bounded:
-        lo = float(spec.value(jnp.asarray(z - Z95 * se_z)))
-        hi = float(spec.value(jnp.asarray(z + Z95 * se_z)))
+        lo = float(spec.value(float(z - Z95 * se_z)))
+        hi = float(spec.value(float(z + Z95 * se_z)))
         at_bound = abs(z) > Z_AT_BOUND
     else:
         lo, hi, at_bound = value - Z95 * se, value + Z95 * se, False

@@ -17,6 +17,7 @@ it nests.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from collections.abc import Callable, Sequence
 
@@ -33,12 +34,13 @@ from idtool._fit._detuning import (
     detuning_profile,
     detuning_sentence,
 )
-from idtool._fit._fit import fit_model
+from idtool._fit._fit import fit_model, lm_program
 from idtool._fit._intervals import Profile, check_intervals, profile_parameter
+from idtool._fit._prefetch import CompileAhead
 from idtool._fit._result import FitResult
-from idtool._fit._variability import with_variability
+from idtool._fit._variability import compile_variability, with_variability
 from idtool._model._actuator import ACTUATORS
-from idtool._model._benchmodel import shared_params_of
+from idtool._model._benchmodel import bench_model, shared_params_of
 from idtool._model._coupling import COUPLINGS
 from idtool._model._laws import FRICTION_LAWS
 from idtool._model._noise import DEFAULT_NOISE
@@ -187,109 +189,125 @@ def fit_dataset(
     actuators = ACTUATORS.names() if actuator == "auto" else (ACTUATORS.get(actuator).name,)
     offsets = OFFSETS.names() if offset == "auto" else (OFFSETS.get(offset).name,)
     settings = check_settings(tuple(settings), laws, couplings, actuators)
-    candidates: dict[str, FitResult] = {}
-    for lw in laws:
-        for cp in couplings:
-            # the simplest actuator model first (multi-start), each richer one nested in
-            # it from its optimum; then each richer offset model nested in the best of
-            # them (both registries list the simplest model first)
-            group: dict[str, FitResult] = {}
-            nested = None
-            for ac in actuators:
-                key = _key(lw, cp, ac, offsets[0])
-                say(f"fitting {key}")
-                fit = fit_model(
-                    data, lw, cp, seed, n_starts, noise, ac, nested, offsets[0], settings
-                )
-                if nested is None and cp != couplings[0]:
-                    # a saturating law also from the simplest law's optimum (its load
-                    # scale far above every alpha N): the multi-start may miss the basin
-                    # where the law is all but the simplest one (data that do not
-                    # saturate: 8 starts found the low-Kt basin instead, 6x off)
-                    simplest = candidates[_key(lw, couplings[0], ac, offsets[0])]
-                    fit = _better(
-                        fit,
-                        fit_model(
-                            data, lw, cp, seed, n_starts, noise, ac, simplest, offsets[0], settings
-                        ),
-                    )
-                group[key] = fit
-                nested = nested or fit
-            base = min(group.values(), key=lambda f: f.bic)
-            ac = base.model.actuator.name
-            for of in offsets[1:]:
-                say(f"fitting {_key(lw, cp, ac, of)}")
-                group[_key(lw, cp, ac, of)] = fit_model(
-                    data, lw, cp, seed, n_starts, noise, ac, base, of, settings
-                )
-            candidates |= group
-    ranked = sorted(candidates.items(), key=lambda kv: kv[1].bic)
-    best_key, best = ranked[0]
-    say(f"checking the intervals of {best_key}")
-    best = candidates[best_key] = check_intervals(best)
-    profiles = {}
-    if detuning_assumed(best):  # sdof without rig.transducer: can the data tell D?
-        say(f"profiling the transducer's detuning of {best_key}")
-        prof, z_best = detuning_profile(best)
-        profiles[DETUNING] = prof
-        sentence, warn = detuning_sentence(prof, best)
-        if warn:  # the traces inform D: estimate it, keep it if BIC says so
-            say(f"fitting {best_key} with the detuning free")
-            detuned = detuned_fit(best, z_best)
-            if detuned.bic < best.bic:
-                detuned = check_intervals(detuned)  # D's interval checked there
-                sentence, warn = detuning_sentence(prof, best, detuned)
-                # the grid found the basin; its interval, interpolated between grid
-                # points around another optimum, is not D's: the checked one is
-                del profiles[DETUNING]
-                best = detuned
-        if warn:
-            best = dataclasses.replace(best, warnings=[*best.warnings, sentence])
+    with CompileAhead() as ahead:
+        # the candidates' programs, compiled in the order the loop below needs them
+        # while it fits the ones before (the first it compiles itself); the offset
+        # models nest in the best actuator model, most often the simplest
+        plan = [(lw, cp, ac, offsets[0]) for lw in laws for cp in couplings for ac in actuators]
+        plan += [
+            (lw, cp, actuators[0], of) for lw in laws for cp in couplings for of in offsets[1:]
+        ]
+        for names in plan[1:]:
+            ahead.call(functools.partial(_compile_lm, data, names, noise, settings))
+        candidates: dict[str, FitResult] = {}
+
+        def fit(lw: str, cp: str, ac: str, of: str, start: FitResult | None) -> FitResult:
+            return fit_model(data, lw, cp, seed, n_starts, noise, ac, start, of, settings)
+
+        for lw in laws:
+            for cp in couplings:
+                # the simplest actuator model first (multi-start), each richer one nested
+                # in it from its optimum; then each richer offset model nested in the
+                # best of them (both registries list the simplest model first)
+                group: dict[str, FitResult] = {}
+                nested = None
+                for ac in actuators:
+                    key = _key(lw, cp, ac, offsets[0])
+                    say(f"fitting {key}")
+                    result = fit(lw, cp, ac, offsets[0], nested)
+                    if nested is None and cp != couplings[0]:
+                        # a saturating law also from the simplest law's optimum (its load
+                        # scale far above every alpha N): the multi-start may miss the
+                        # basin where the law is all but the simplest one (data that do
+                        # not saturate: 8 starts found the low-Kt basin instead, 6x off)
+                        simplest = candidates[_key(lw, couplings[0], ac, offsets[0])]
+                        result = _better(result, fit(lw, cp, ac, offsets[0], simplest))
+                    if variability and not candidates and not group:
+                        # the first fit tells the levels model's shapes
+                        ahead.call(functools.partial(compile_variability, result))
+                    group[key] = result
+                    nested = nested or result
+                base = min(group.values(), key=lambda f: f.bic)
+                ac = base.model.actuator.name
+                for of in offsets[1:]:
+                    say(f"fitting {_key(lw, cp, ac, of)}")
+                    group[_key(lw, cp, ac, of)] = fit(lw, cp, ac, of, base)
+                candidates |= group
+        ranked = sorted(candidates.items(), key=lambda kv: kv[1].bic)
+        best_key, best = ranked[0]
+        say(f"checking the intervals of {best_key}")
+        best = candidates[best_key] = check_intervals(best)
+        profiles = {}
+        if detuning_assumed(best):  # sdof without rig.transducer: can the data tell D?
+            say(f"profiling the transducer's detuning of {best_key}")
+            prof, z_best = detuning_profile(best)
+            profiles[DETUNING] = prof
+            sentence, warn = detuning_sentence(prof, best)
+            if warn:  # the traces inform D: estimate it, keep it if BIC says so
+                say(f"fitting {best_key} with the detuning free")
+                detuned = detuned_fit(best, z_best)
+                if detuned.bic < best.bic:
+                    detuned = check_intervals(detuned)  # D's interval checked there
+                    sentence, warn = detuning_sentence(prof, best, detuned)
+                    # the grid found the basin; its interval, interpolated between grid
+                    # points around another optimum, is not D's: the checked one is
+                    del profiles[DETUNING]
+                    best = detuned
+            if warn:
+                best = dataclasses.replace(best, warnings=[*best.warnings, sentence])
+            else:
+                best = dataclasses.replace(best, notes=[*best.notes, sentence])
+            candidates[best_key] = best
+        if variability:  # pull-to-pull scatter and model discrepancy (issue 10)
+            say("estimating the pull-to-pull scatter and the model discrepancy")
+            best = candidates[best_key] = with_variability(best)
+        weights = coupling_weights(candidates)
+        chosen = weights[best.model.coupling.name]
+        alternates = {}
+        for w in weights.values():
+            if w is not chosen and w.bic_weight >= MIN_LAW_WEIGHT:
+                say(f"the levels model of {w.key} (BIC weight {w.bic_weight:.3f})")
+                fit = candidates[w.key]
+                alternates[w.law] = with_variability(fit) if variability else fit
+        rivals = [w for w in weights.values() if w is not chosen and w.bic_weight > 0.05]
+        if rivals:  # the data do not single out the coupling's shape
+            run_warnings.append(
+                f"the coupling laws fit comparably (BIC weight {chosen.law} "
+                f"{chosen.bic_weight:.2f}, "
+                + ", ".join(f"{w.law} {w.bic_weight:.2f}" for w in rivals)
+                + "): the estimates are the chosen law's; predictions average the laws by "
+                "their BIC weights, so where the laws disagree (between or beyond the "
+                "measured operating points) the bands include their spread"
+            )
+        if run_warnings:  # for the fit report
+            best = candidates[best_key] = dataclasses.replace(
+                best, warnings=[*best.warnings, *run_warnings]
+            )
+        if len(ranked) == 1:
+            reason = f"{best_key} as requested"
         else:
-            best = dataclasses.replace(best, notes=[*best.notes, sentence])
-        candidates[best_key] = best
-    if variability:  # pull-to-pull scatter and model discrepancy (issue 10)
-        say("estimating the pull-to-pull scatter and the model discrepancy")
-        best = candidates[best_key] = with_variability(best)
-    weights = coupling_weights(candidates)
-    chosen = weights[best.model.coupling.name]
-    alternates = {}
-    for w in weights.values():
-        if w is not chosen and w.bic_weight >= MIN_LAW_WEIGHT:
-            say(f"the levels model of {w.key} (BIC weight {w.bic_weight:.3f})")
-            fit = candidates[w.key]
-            alternates[w.law] = with_variability(fit) if variability else fit
-    rivals = [w for w in weights.values() if w is not chosen and w.bic_weight > 0.05]
-    if rivals:  # the data do not single out the coupling's shape
-        run_warnings.append(
-            f"the coupling laws fit comparably (BIC weight {chosen.law} "
-            f"{chosen.bic_weight:.2f}, "
-            + ", ".join(f"{w.law} {w.bic_weight:.2f}" for w in rivals)
-            + "): the estimates are the chosen law's; predictions average the laws by "
-            "their BIC weights, so where the laws disagree (between or beyond the "
-            "measured operating points) the bands include their spread"
-        )
-    if run_warnings:  # for the fit report
-        best = candidates[best_key] = dataclasses.replace(
-            best, warnings=[*best.warnings, *run_warnings]
-        )
-    if len(ranked) == 1:
-        reason = f"{best_key} as requested"
-    else:
-        second_key, second = ranked[1]
-        reason = (
-            f"{best_key}: BIC lower by {second.bic - best.bic:.1f} and AIC by "
-            f"{second.aic - best.aic:.1f} than {second_key}"
-        )
-    if coupling == "auto" and single_load:
-        reason += (
-            "; all traces share one normal load, so the power-limited coupling cannot be "
-            "told apart from the constant one: the simpler is kept"
-        )
-    if profile:
-        for name in best.model.physical_names:
-            profiles[name] = profile_parameter(best, name)
-    return FitRun(data, best, candidates, reason, seed, profiles, alternates)
+            second_key, second = ranked[1]
+            reason = (
+                f"{best_key}: BIC lower by {second.bic - best.bic:.1f} and AIC by "
+                f"{second.aic - best.aic:.1f} than {second_key}"
+            )
+        if coupling == "auto" and single_load:
+            reason += (
+                "; all traces share one normal load, so the power-limited coupling cannot be "
+                "told apart from the constant one: the simpler is kept"
+            )
+        if profile:
+            for name in best.model.physical_names:
+                profiles[name] = profile_parameter(best, name)
+        return FitRun(data, best, candidates, reason, seed, profiles, alternates)
+
+
+def _compile_lm(data: FitData, names: tuple[str, str, str, str], noise: str, settings) -> None:
+    """Compile the Levenberg-Marquardt program of the model ``names`` (law, coupling,
+    actuator, offset)."""
+    lw, cp, ac, of = names
+    fn, args = lm_program(bench_model(data, lw, cp, noise, ac, of, settings))
+    fn.lower(*args).compile()
 
 
 def check_settings(

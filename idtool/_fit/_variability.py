@@ -48,9 +48,8 @@ from __future__ import annotations
 import dataclasses
 import math
 
-import jax
-import jax.numpy as jnp
 import numpy as np
+import scipy.special
 
 from idtool._fit._discrepancy import Conditioning, correlation, length_scales, operating_coordinates
 from idtool._fit._free_levels import MIN_AT_LEVEL_S, FreeLevels, free_levels, model_log_levels
@@ -252,7 +251,9 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
         raise NoMeasuredLevels("no trace's ON window is long enough to measure its ON level")
     rows, separable = design.rows, design.separable
     mask = design.active.astype(float)
-    args = (jnp.asarray(free.cov_y), jnp.asarray(design.kinds), jnp.asarray(design.disc_corr))
+    # NumPy arrays throughout: the jitted programs take them as they are, and the host's
+    # own arithmetic on them dispatches no eager JAX operations (:mod:`idtool._model._xp`)
+    args = (np.asarray(free.cov_y), np.asarray(design.kinds), np.asarray(design.disc_corr))
     z = np.asarray(z, float)
     theta = z[:k].copy()
     s = np.log(np.full(3, 0.01))
@@ -260,7 +261,7 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
     for _ in range(12):
         g_all, jac_all = levels
         r, g = free.y - g_all[rows], jac_all[rows]
-        s = np.asarray(fit_sds(jnp.asarray(s), jnp.asarray(mask), r, g, *args))
+        s = np.asarray(fit_sds(s, mask, r, g, *args))
         s = np.clip(s, math.log(1e-6), math.log(2.0))
         tau2 = mask * np.exp(2.0 * s)
         _, step = at_sds(tau2, r, g, args)
@@ -286,7 +287,7 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
     r0 = r - g @ step0
     chi2 = float(r0 @ np.linalg.solve(free.cov_y, r0))
     dof = int(n - k)
-    p_value = float(jax.scipy.special.gammaincc(dof / 2.0, chi2 / 2.0)) if dof > 0 else 1.0
+    p_value = float(scipy.special.gammaincc(dof / 2.0, chi2 / 2.0)) if dof > 0 else 1.0
 
     sds, grids = {}, {}
     for j, p in enumerate(SD_PARAMS):
@@ -300,7 +301,7 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
             grid = np.linspace(0.0, top, GRID)
             t2 = np.tile(tau2, (GRID, 1))
             t2[:, j] = grid**2
-            nl = np.asarray(evaluate(jnp.asarray(t2), r, g, *args, True)[0])
+            nl = np.asarray(evaluate(t2, r, g, *args, True)[0])
             if nl[-1] - nl.min() > math.log(1e3):
                 break
             top *= 2.0
@@ -359,6 +360,18 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
         warnings=tuple(warnings),
         notes=tuple(notes),
     )
+
+
+def compile_variability(result: FitResult) -> None:
+    """Compile the levels model's programs for ``result``'s traces (their shapes: how
+    many ON levels are measured), for :func:`estimate_variability` to find compiled;
+    run in :class:`~idtool._fit._prefetch.CompileAhead`'s thread."""
+    free = free_levels(result.model, result.z, result.phi)
+    n, k = free.y.size, result.model.n_physical
+    r, g = np.zeros(n), np.zeros((n, k))
+    args = (np.eye(n), np.zeros((n, 2)), np.zeros((n, n)))
+    fit_sds.lower(np.zeros(3), np.zeros(3), r, g, *args).compile()
+    evaluate.lower(np.zeros((GRID, 3)), r, g, *args, True).compile()
 
 
 def with_variability(result: FitResult) -> FitResult:

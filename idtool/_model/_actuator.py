@@ -37,6 +37,7 @@ from jaxtyping import Array, ArrayLike, Float
 from idtool._model._bench import TraceTiming, mean_force_n
 from idtool._model._names import DEFAULT_ACTUATOR
 from idtool._model._params import Param
+from idtool._model._xp import xp
 from idtool._registry import Registry
 
 __all__ = [
@@ -127,7 +128,7 @@ class SlopeActuator(AbstractActuator):
         )
 
     def settle_time_s(self, depth_n):
-        return (1.0 - SETTLED_FRACTION) * jnp.asarray(depth_n) / self.slope_n_s
+        return (1.0 - SETTLED_FRACTION) * depth_n / self.slope_n_s
 
 
 @ACTUATORS.register("lag")
@@ -155,11 +156,12 @@ class LagActuator(AbstractActuator):
         )
 
     def settle_time_s(self, depth_n):
-        depth = jnp.asarray(depth_n)
-        tail = jnp.minimum(depth, self.slope_n_s * self.time_constant_s)
+        x = xp(depth_n, self.slope_n_s, self.time_constant_s)  # NumPy on the host
+        depth = x.asarray(depth_n)
+        tail = x.minimum(depth, self.slope_n_s * self.time_constant_s)
         # rate-limited part, then the exponential down to SETTLED_FRACTION of the depth
-        return (depth - tail) / self.slope_n_s + self.time_constant_s * jnp.log(
-            jnp.maximum(tail / (SETTLED_FRACTION * depth), 1.0)
+        return (depth - tail) / self.slope_n_s + self.time_constant_s * x.log(
+            x.maximum(tail / (SETTLED_FRACTION * depth), 1.0)
         )
 
 

@@ -46,6 +46,7 @@ from idtool._model._noise import DEFAULT_NOISE, NOISE_MODELS, AbstractNoise, whi
 from idtool._model._offset import DEFAULT_OFFSET, OFFSETS, AbstractOffset
 from idtool._model._params import Param
 from idtool._model._settings import ParameterSetting, apply_settings, fixed_values
+from idtool._model._xp import xp
 
 __all__ = ["TRACE_GROUPS", "BenchModel", "bench_model", "shared_params_of"]
 
@@ -150,11 +151,13 @@ class BenchModel(eqx.Module):
         )
 
     def values(self, z: Float[Array, " p"]) -> dict[str, Array]:
-        """Physical values: shared names map to scalars, per-trace groups to arrays."""
+        """Physical values: shared names map to scalars, per-trace groups to arrays
+        (NumPy for a NumPy ``z``, JAX otherwise: :mod:`idtool._model._xp`)."""
         k, n = self.n_shared, self.data.n_traces
         out = {p.name: p.value(z[i]) for i, p in enumerate(self.shared_params)}
+        centre = self.nuisance_centre if xp(z) is jnp else np.asarray(self.nuisance_centre)
         for j, (group, _, scale) in enumerate(self.trace_groups):
-            out[group] = self.nuisance_centre[j] + scale * z[k + j * n : k + (j + 1) * n]
+            out[group] = centre[j] + scale * z[k + j * n : k + (j + 1) * n]
         return out
 
     def z0(self, **physical: float) -> np.ndarray:

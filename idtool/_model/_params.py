@@ -16,9 +16,9 @@ from __future__ import annotations
 import dataclasses
 import math
 
-import jax
-import jax.numpy as jnp
 import numpy as np
+
+from idtool._model._xp import sigmoid, softplus, xp
 
 __all__ = ["KINDS", "Param"]
 
@@ -73,12 +73,13 @@ class Param:
         return self.kind != "linear"
 
     def value(self, z):
-        """Physical value of internal ``z`` (JAX; any shape)."""
+        """Physical value of internal ``z`` (any shape; JAX for a JAX array or tracer,
+        NumPy for numbers: :mod:`idtool._model._xp`)."""
         if self.kind == "log":
             a, b = math.log(self.lo), math.log(self.hi)
-            return jnp.exp(a + (b - a) * jax.nn.sigmoid(z))
+            return xp(z).exp(a + (b - a) * sigmoid(z))
         if self.kind == "tanh":
-            return self.lo + (self.hi - self.lo) * 0.5 * (1.0 + jnp.tanh(z))
+            return self.lo + (self.hi - self.lo) * 0.5 * (1.0 + xp(z).tanh(z))
         return self.centre + self.scale * z
 
     def transform(self) -> dict[str, str | float]:
@@ -96,24 +97,24 @@ class Param:
         return out | {"centre": self.centre, "scale": self.scale, "value": "centre + scale z"}
 
     def log_jacobian(self, z):
-        """``log |d value / d z|`` (JAX), stable for large ``|z|``."""
+        """``log |d value / d z|``, stable for large ``|z|`` (JAX or NumPy as
+        :meth:`value`)."""
+        x = xp(z)
         if self.kind == "log":
             a, b = math.log(self.lo), math.log(self.hi)
-            log_s, log_1ms = -jax.nn.softplus(-z), -jax.nn.softplus(z)
-            return a + (b - a) * jnp.exp(log_s) + math.log(b - a) + log_s + log_1ms
+            log_s, log_1ms = -softplus(-z), -softplus(z)
+            return a + (b - a) * x.exp(log_s) + math.log(b - a) + log_s + log_1ms
         if self.kind == "tanh":
             # d/dz (1 + tanh z)/2 = sech(z)^2 / 2 = 2 / (e^z + e^-z)^2
-            az = jnp.abs(z)
+            az = x.abs(z)
             return (
-                math.log(self.hi - self.lo)
-                + math.log(2.0)
-                - 2.0 * (az + jnp.log1p(jnp.exp(-2.0 * az)))
+                math.log(self.hi - self.lo) + math.log(2.0) - 2.0 * (az + x.log1p(x.exp(-2.0 * az)))
             )
-        return jnp.asarray(math.log(abs(self.scale))) + 0.0 * z
+        return math.log(abs(self.scale)) + 0.0 * x.asarray(z, float)
 
     def slope(self, z: float) -> float:
         """``d value / d z`` at ``z`` (NumPy float, for the delta method)."""
-        return float(np.exp(self.log_jacobian(jnp.asarray(z, float))))
+        return float(np.exp(self.log_jacobian(float(z))))
 
     def internal(self, value: float) -> float:
         """Internal ``z`` of a physical value (clipped just inside the range)."""

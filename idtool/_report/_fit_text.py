@@ -4,11 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 from idtool._fit._derived import derived_estimates
+from idtool._fit._fit import prediction_at
 from idtool._fit._result import Estimate, FitResult
 from idtool._fit._run import FitRun
 from idtool._fit._store import law_state_file
@@ -18,8 +17,6 @@ from idtool._version import __version__
 __all__ = ["fit_json", "fit_report", "plot_fit"]
 
 # The model is an argument (its data are leaves): one program per dataset shape.
-_predict = jax.jit(lambda model, z: model.predict(z))
-_residuals = jax.jit(lambda model, z, phi: model.residuals(z, phi))
 
 
 def _est(e: Estimate) -> dict:
@@ -140,10 +137,7 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
                 "rss": o["rss"],
                 "count": o["count"],
                 "converged": bool(o["converged"]),
-                **{
-                    n: float(r.model.params[j].value(jnp.asarray(o["z"][j])))
-                    for j, n in enumerate(phys)
-                },
+                **{n: float(r.model.params[j].value(float(o["z"][j]))) for j, n in enumerate(phys)},
             }
             for o in r.optima
         ],
@@ -311,7 +305,7 @@ def plot_fit(run: FitRun, out_dir: str | Path) -> list[Path]:
 
     r, d = run.chosen, run.data
     out = Path(out_dir)
-    pred = np.asarray(_predict(r.model, jnp.asarray(r.z)))
+    pred, w = prediction_at(r.model, r.z, r.phi)
     resid = d.force_n - pred
     half = 1.96 * r.sigma_n / np.sqrt(1.0 - min(r.phi**2, 0.999))
     cols = 4
@@ -342,7 +336,6 @@ def plot_fit(run: FitRun, out_dir: str | Path) -> list[Path]:
     paths = [out / "traces.png"]
     save_figure(fig, paths[-1], tight=False)
 
-    w = np.asarray(_residuals(r.model, jnp.asarray(r.z), r.phi))
     fig, (a1, a2, a3) = subplots(1, 3, figsize=(MAX_WIDTH_IN, 3.6))
     for i in range(d.n_traces):
         sel = d.block_trace == i
