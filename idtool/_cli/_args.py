@@ -7,7 +7,7 @@ import functools
 import math
 from collections.abc import Callable, Iterable, Iterator
 
-__all__ = ["LazyChoices", "number_list"]
+__all__ = ["LazyChoices", "add_law_argument", "number_list", "registry_names"]
 
 
 class LazyChoices:
@@ -32,6 +32,32 @@ class LazyChoices:
 
     def __len__(self) -> int:
         return len(self._values)
+
+
+def registry_names(registry: str, *extra: str, fittable: bool = False) -> LazyChoices:
+    """The names registered in ``idtool.<registry>`` (``"COUPLINGS"``, ``"ACTUATORS"``,
+    ...) then ``extra`` (e.g. ``"auto"``), read when first needed; ``fittable``: only the
+    friction laws with parameters to fit (not Coulomb's)."""
+
+    def names() -> tuple[str, ...]:
+        import idtool
+
+        found = getattr(idtool, registry)
+        kept = [n for n in found.names() if not fittable or found.get(n).fit_params]
+        return (*kept, *extra)
+
+    return LazyChoices(names)
+
+
+def add_law_argument(parser: argparse.ArgumentParser) -> None:
+    """``--law``: the friction law to fit (those with parameters), default Dahl."""
+    parser.add_argument(
+        "--law",
+        choices=registry_names("FRICTION_LAWS", fittable=True),
+        metavar="LAW",
+        default="dahl",
+        help="friction law: %(choices)s (default dahl)",
+    )
 
 
 def number_list(text: str) -> list[float]:

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from idtool._cli._args import LazyChoices
+from idtool._cli._args import registry_names
 from idtool._errors import IdtoolError
 
 if TYPE_CHECKING:
@@ -104,12 +104,6 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _law_names() -> tuple[str, ...]:
-    from idtool._model._laws import FRICTION_LAWS
-
-    return FRICTION_LAWS.names()
-
-
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "curve",
@@ -120,7 +114,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--law",
-        choices=LazyChoices(_law_names),
+        choices=registry_names("FRICTION_LAWS"),
         metavar="LAW",
         default="dahl",
         help="friction law: %(choices)s (default dahl)",

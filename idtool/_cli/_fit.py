@@ -5,11 +5,10 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
 
 from idtool._atomic import refuse_existing
-from idtool._cli._args import LazyChoices
+from idtool._cli._args import add_law_argument, registry_names
 
 __all__ = ["register"]
 
@@ -65,27 +64,6 @@ def _progress(line: str) -> None:
     print(f"idtool fit: {line}", file=sys.stderr, flush=True)
 
 
-def _fittable_laws() -> list[str]:
-    from idtool import FRICTION_LAWS
-
-    return [n for n in FRICTION_LAWS if FRICTION_LAWS.get(n).fit_params]
-
-
-def _with_auto(registry: str) -> Callable[[], tuple[str, ...]]:
-    def names() -> tuple[str, ...]:
-        import idtool
-
-        return (*getattr(idtool, registry).names(), "auto")
-
-    return names
-
-
-def _noise_names() -> tuple[str, ...]:
-    from idtool import NOISE_MODELS
-
-    return NOISE_MODELS.names()
-
-
 def register(sub: argparse._SubParsersAction) -> None:
     from idtool._model._names import DEFAULT_NOISE
 
@@ -97,16 +75,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("dataset", help="dataset folder (or its dataset.json)")
     p.add_argument("--out", required=True, help="output folder, e.g. fits/NAME")
-    p.add_argument(
-        "--law",
-        choices=LazyChoices(_fittable_laws),
-        metavar="LAW",
-        default="dahl",
-        help="friction law: %(choices)s (default dahl)",
-    )
+    add_law_argument(p)
     p.add_argument(
         "--coupling",
-        choices=LazyChoices(_with_auto("COUPLINGS")),
+        choices=registry_names("COUPLINGS", "auto"),
         metavar="LAW",
         default="power-limited",
         help="coupling law: %(choices)s (default power-limited, the paper's finding); "
@@ -114,7 +86,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--actuator",
-        choices=LazyChoices(_with_auto("ACTUATORS")),
+        choices=registry_names("ACTUATORS", "auto"),
         metavar="MODEL",
         default="auto",
         help="how the force follows its target, %(choices)s: slope (constant slopes), lag "
@@ -122,7 +94,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--offset",
-        choices=LazyChoices(_with_auto("OFFSETS")),
+        choices=registry_names("OFFSETS", "auto"),
         metavar="MODEL",
         default="auto",
         help="the load-cell offset within a trace, %(choices)s: constant, drift (linear, "
@@ -130,7 +102,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--noise",
-        choices=LazyChoices(_noise_names),
+        choices=registry_names("NOISE_MODELS"),
         metavar="MODEL",
         default=DEFAULT_NOISE,
         help=f"noise model of the block means: %(choices)s (default {DEFAULT_NOISE})",

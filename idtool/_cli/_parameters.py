@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
 from pathlib import Path
 
 from idtool._atomic import refuse_existing, write_text_atomic
-from idtool._cli._args import LazyChoices
+from idtool._cli._args import add_law_argument, registry_names
 from idtool._model._names import DEFAULT_ACTUATOR
 
 __all__ = ["register"]
@@ -33,18 +32,7 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _names(registry: str) -> Callable[[], tuple[str, ...]]:
-    def names() -> tuple[str, ...]:
-        import idtool
-
-        return getattr(idtool, registry).names()
-
-    return names
-
-
 def register(sub: argparse._SubParsersAction) -> None:
-    from idtool._cli._fit import _fittable_laws
-
     p = sub.add_parser(
         "parameters",
         help="write a model's parameter table (PEtab-like) for 'idtool fit --parameters'",
@@ -53,23 +41,17 @@ def register(sub: argparse._SubParsersAction) -> None:
         "a parameter table to edit (fix a value with estimate 0 and nominalValue, narrow "
         "the bounds, give a start or a prior) and pass to 'idtool fit --parameters'.",
     )
-    p.add_argument(
-        "--law",
-        choices=LazyChoices(_fittable_laws),
-        metavar="LAW",
-        default="dahl",
-        help="friction law: %(choices)s (default dahl)",
-    )
+    add_law_argument(p)
     p.add_argument(
         "--coupling",
-        choices=LazyChoices(_names("COUPLINGS")),
+        choices=registry_names("COUPLINGS"),
         metavar="LAW",
         default="power-limited",
         help="coupling law: %(choices)s (default power-limited)",
     )
     p.add_argument(
         "--actuator",
-        choices=LazyChoices(_names("ACTUATORS")),
+        choices=registry_names("ACTUATORS"),
         metavar="MODEL",
         default=DEFAULT_ACTUATOR,
         help=f"actuator model: %(choices)s (default {DEFAULT_ACTUATOR})",

@@ -81,8 +81,7 @@ def _positive_int(text: str) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from idtool._cli._args import LazyChoices
-    from idtool._cli._fit import _noise_names
+    from idtool._cli._args import registry_names
 
     p = sub.add_parser(
         "sample",
@@ -101,7 +100,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--force", action="store_true", help="discard an existing chain.h5")
     p.add_argument(
         "--noise",
-        choices=LazyChoices(_noise_names),
+        choices=registry_names("NOISE_MODELS"),
         metavar="MODEL",
         default=None,
         help="noise model of the block means, %(choices)s (default: the fit's, ar1 unless told; "
