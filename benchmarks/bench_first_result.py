@@ -7,7 +7,9 @@ the persistent compilation cache of the command line, in phases:
 * ``load``: reading and checking the dataset;
 * ``fit``: ``idtool.fit`` (multi-start, polish, AR(1) rounds, interval checks), with
   the JAX tracing, lowering to StableHLO and XLA compilation (or cache loading) inside
-  it reported separately from ``jax.monitoring``;
+  it reported separately from ``jax.monitoring``, summed over threads: the fit compiles
+  the next candidate models' programs in a thread of its own while it computes
+  (``idtool._fit._prefetch``), so these can add up to more than the phase's time;
 * ``report``: the text report; ``save``: fit.json, fit_state.npz and the two figures.
 
 First with an empty cache folder (cold: what a new user waits), then three times with

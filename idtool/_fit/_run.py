@@ -201,7 +201,7 @@ def fit_dataset(
             ahead.call(functools.partial(_compile_lm, data, names, noise, settings))
         candidates: dict[str, FitResult] = {}
 
-        def fit(lw: str, cp: str, ac: str, of: str, start: FitResult | None) -> FitResult:
+        def fit_one(lw: str, cp: str, ac: str, of: str, start: FitResult | None) -> FitResult:
             return fit_model(data, lw, cp, seed, n_starts, noise, ac, start, of, settings)
 
         for lw in laws:
@@ -214,14 +214,14 @@ def fit_dataset(
                 for ac in actuators:
                     key = _key(lw, cp, ac, offsets[0])
                     say(f"fitting {key}")
-                    result = fit(lw, cp, ac, offsets[0], nested)
+                    result = fit_one(lw, cp, ac, offsets[0], nested)
                     if nested is None and cp != couplings[0]:
                         # a saturating law also from the simplest law's optimum (its load
                         # scale far above every alpha N): the multi-start may miss the
                         # basin where the law is all but the simplest one (data that do
                         # not saturate: 8 starts found the low-Kt basin instead, 6x off)
                         simplest = candidates[_key(lw, couplings[0], ac, offsets[0])]
-                        result = _better(result, fit(lw, cp, ac, offsets[0], simplest))
+                        result = _better(result, fit_one(lw, cp, ac, offsets[0], simplest))
                     if variability and not candidates and not group:
                         # the first fit tells the levels model's shapes
                         ahead.call(functools.partial(compile_variability, result))
@@ -231,7 +231,7 @@ def fit_dataset(
                 ac = base.model.actuator.name
                 for of in offsets[1:]:
                     say(f"fitting {_key(lw, cp, ac, of)}")
-                    group[_key(lw, cp, ac, of)] = fit(lw, cp, ac, of, base)
+                    group[_key(lw, cp, ac, of)] = fit_one(lw, cp, ac, of, base)
                 candidates |= group
         ranked = sorted(candidates.items(), key=lambda kv: kv[1].bic)
         best_key, best = ranked[0]

@@ -99,7 +99,7 @@ class BenchModel(eqx.Module):
         """The shared parameters the user fixed: name -> value (physical units)."""
         return dict(fixed_values(self.declared_params, self.settings))
 
-    def complete(self, v: Mapping[str, Array]) -> dict[str, Array]:
+    def complete(self, v: Mapping[str, ArrayLike]) -> dict[str, ArrayLike]:
         """``v`` with the fixed parameters' values added: what the physics reads."""
         return {**v, **{name: jnp.asarray(x) for name, x in self.fixed.items()}}
 
@@ -150,7 +150,7 @@ class BenchModel(eqx.Module):
             [np.full(self.n_shared, -1), np.tile(np.arange(n), len(self.trace_groups))]
         )
 
-    def values(self, z: Float[Array, " p"]) -> dict[str, Array]:
+    def values(self, z: Float[Array | np.ndarray, " p"]) -> dict[str, Array]:
         """Physical values: shared names map to scalars, per-trace groups to arrays
         (NumPy for a NumPy ``z``, JAX otherwise: :mod:`idtool._model._xp`)."""
         k, n = self.n_shared, self.data.n_traces
@@ -171,14 +171,14 @@ class BenchModel(eqx.Module):
         return z
 
     # ------------------------------------------------------------------ physics
-    def law_at(self, v: Mapping[str, Array], normal_load_n) -> AbstractFrictionLaw:
+    def law_at(self, v: Mapping[str, ArrayLike], normal_load_n) -> AbstractFrictionLaw:
         """The friction law under ``normal_load_n`` [N] (``Fc = mu N``)."""
         return self.law.at_load(self.complete(v), normal_load_n)
 
-    def coupling_of(self, v: Mapping[str, Array]) -> AbstractCoupling:
+    def coupling_of(self, v: Mapping[str, ArrayLike]) -> AbstractCoupling:
         return self.coupling.from_values(self.complete(v))
 
-    def actuator_of(self, v: Mapping[str, Array]) -> AbstractActuator:
+    def actuator_of(self, v: Mapping[str, ArrayLike]) -> AbstractActuator:
         return self.actuator.from_values(self.complete(v))
 
     def friction_ratios(self, v: Mapping[str, Array], load_n, alpha, speed_m_s) -> Array:

@@ -98,7 +98,7 @@ class AbstractCoupling(eqx.Module):
 
     @classmethod
     @abc.abstractmethod
-    def from_values(cls, values: Mapping[str, Array]) -> AbstractCoupling:
+    def from_values(cls, values: Mapping[str, ArrayLike]) -> AbstractCoupling:
         """The law from parameter values by name (its ``fit_params``)."""
 
     @abc.abstractmethod

@@ -77,7 +77,7 @@ class AbstractFrictionLaw(eqx.Module):
     @classmethod
     @abc.abstractmethod
     def at_load(
-        cls, values: Mapping[str, Array], normal_load_n: Float[ArrayLike, "*b"]
+        cls, values: Mapping[str, ArrayLike], normal_load_n: Float[ArrayLike, "*b"]
     ) -> AbstractFrictionLaw:
         """The law of the contact under ``normal_load_n`` [N], from parameter values by
         name (``mu`` and this law's ``fit_params``): ``Fc = mu N`` (notes §5)."""

@@ -39,7 +39,7 @@ class LoadExponentialCoupling(AbstractCoupling):
     name: ClassVar[str] = "load_exponential"
 
     @classmethod
-    def from_values(cls, values: Mapping[str, Array]) -> LoadExponentialCoupling:
+    def from_values(cls, values: Mapping[str, ArrayLike]) -> LoadExponentialCoupling:
         return cls(gain=values["coupling_gain"], load_scale_n=values["load_scale_n"])
 
     def amplitude_m(
