@@ -2,6 +2,7 @@
 the two-time-scale averaging, and the ``idtool fit`` command."""
 
 import copy
+import dataclasses
 import json
 
 import jax
@@ -14,7 +15,9 @@ from scipy.integrate import solve_ivp
 
 import idtool
 from idtool._cli._main import main
-from idtool._fit._fit import prediction_at
+from idtool._data._blocks import prepare_fit_data
+from idtool._fit._fit import prediction_at, run_lm
+from idtool._fit._reml import evaluate, fit_sds
 from idtool._fit._run import fit_dataset
 from idtool._model._benchmodel import bench_model
 
@@ -79,6 +82,41 @@ def test_prediction_from_the_fits_program_is_the_models(example_run):
     np.testing.assert_allclose(pred, np.asarray(r.model.predict(jnp.asarray(r.z))), atol=1e-9)
     want = np.asarray(r.model.residuals(jnp.asarray(r.z), r.phi))
     np.testing.assert_allclose(w, want, atol=1e-9)
+
+
+def test_another_dataset_of_the_same_shape_runs_the_same_compiled_program(example_run):
+    """A dataset's names, hash and notes are not part of the compiled programs' keys
+    (DataLabels compare equal): another bench of the same shape is neither traced nor
+    compiled again, and its own data (not the first one's) go in."""
+    dataset = idtool.load_dataset(idtool.example_dataset_path())
+    traces = tuple(
+        dataclasses.replace(tr, id=f"{tr.id}_b", force_n=1.01 * tr.force_n) for tr in dataset.traces
+    )
+    other = dataclasses.replace(dataset, name="another bench", sha256="0" * 64, traces=traces)
+    data = example_run.data
+    model = bench_model(data)
+    twin = bench_model(prepare_fit_data(other, mains_hz=data.mains_hz, periods_per_block=2))
+    assert twin.data.trace_ids != model.data.trace_ids
+    z = np.asarray(model.z0())
+    mask = np.ones(z.size, bool)
+    first = run_lm(model, z, mask, 0.0, 0)
+    size = run_lm._cache_size()
+    second = run_lm(twin, z, mask, 0.0, 0)
+    assert run_lm._cache_size() == size
+    # every force 1% larger (a constant shift would go into the offsets' centres)
+    assert not np.allclose(np.asarray(first.residuals), np.asarray(second.residuals))
+
+
+def test_the_programs_compiled_ahead_are_the_ones_the_fit_runs():
+    """The fit compiles the next candidates' and the levels model's programs in a thread
+    (idtool._fit._prefetch) with arguments of the types the fit's own calls take: had
+    one differed (a weak type, a dtype), its program would be compiled twice."""
+    jax.clear_caches()
+    run = fit_dataset(idtool.load_dataset(idtool.example_dataset_path()), seed=0)
+    assert len(run.candidates) == 3  # slope, lag; drifting offset on the best
+    assert run_lm._cache_size() == len(run.candidates)
+    assert fit_sds._cache_size() == 1
+    assert evaluate._cache_size() == 1
 
 
 def test_short_on_windows_that_never_reach_the_on_level():
