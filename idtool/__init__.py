@@ -83,7 +83,7 @@ _LAZY = {
     "table2": "idtool._model._transducer",
     "transducer_steady_state": "idtool._model._transducer",
     "Prior": "idtool._posterior._prior",
-    "Posterior": "idtool._posterior._sample",
+    "Posterior": "idtool._posterior._posterior",
     "AmplitudeFor": "idtool._predict._amplitude",
     "Prediction": "idtool._predict._predict",
     "Amplitudes": "idtool._predict._tables",
@@ -98,8 +98,8 @@ _LAZY = {
     "simulate_bench": "idtool._simulate._simulate",
     "write_simulation": "idtool._simulate._simulate",
     "Fit": "idtool._workflow",
-    "fit": "idtool._workflow",
-    "load_fit": "idtool._workflow",
+    "fit": "idtool._entry",
+    "load_fit": "idtool._entry",
 }
 
 __all__ = [
@@ -198,6 +198,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
     from idtool._data._example import example_dataset_path, example_params_path
     from idtool._data._import import import_daq
     from idtool._data._write import write_dataset
+    from idtool._entry import fit, load_fit
     from idtool._errors import IdtoolError
     from idtool._fit._parameter_table import read_parameter_table
     from idtool._fit._result import Estimate
@@ -229,8 +230,8 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
         table2,
         transducer_steady_state,
     )
+    from idtool._posterior._posterior import Posterior
     from idtool._posterior._prior import Prior
-    from idtool._posterior._sample import Posterior
     from idtool._predict._amplitude import AmplitudeFor
     from idtool._predict._predict import Prediction
     from idtool._predict._tables import Amplitudes, Predictions
@@ -240,4 +241,4 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
     from idtool._simulate._params import BenchParams, load_bench_params
     from idtool._simulate._simulate import simulate_bench, write_simulation
     from idtool._simulate._truth import BenchTruth
-    from idtool._workflow import Fit, fit, load_fit
+    from idtool._workflow import Fit

@@ -18,7 +18,7 @@ import pytest
 from idtool import ACTUATORS, LagActuator, SlopeActuator
 from idtool._model._actuator import CORNER_N, SETTLED_FRACTION, lag_force_n
 from idtool._model._bench import TraceTiming
-from idtool._simulate._simulate import lag_actuator_force_n
+from idtool._simulate._lag import lag_actuator_force_n
 
 OFF_N, ON_N = 200.0, 90.0
 TIMING = TraceTiming(startup_s=0.5, on_start_s=4.0, on_end_s=5.2)  # ends before settling

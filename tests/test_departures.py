@@ -22,10 +22,10 @@ from idtool._errors import IdtoolError
 from idtool._model._bench import dahl_at_load, on_friction_ratio
 from idtool._model._coupling import COUPLINGS
 from idtool._simulate._departures import DEPARTURE_KINDS, departure_params
+from idtool._simulate._lag import lag_actuator_force_n
 from idtool._simulate._simulate import (
     TRUTH_FILE,
     experiment_plan,
-    lag_actuator_force_n,
     noise_free_force_n,
     true_friction_ratio,
 )

@@ -79,7 +79,7 @@ class FitResult:
     def conditioning(self):
         """What predictions condition the discrepancy on (the traces' own friction
         ratios, :mod:`idtool._fit._discrepancy`), or None when the levels model is off."""
-        from idtool._fit._variability import discrepancy_conditioning
+        from idtool._fit._level_design import discrepancy_conditioning
 
         levels = self.levels
         return None if levels is None else discrepancy_conditioning(self.model, levels[0])

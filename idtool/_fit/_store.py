@@ -18,8 +18,8 @@ from idtool._data._dataset import Dataset, load_dataset
 from idtool._errors import IdtoolError
 from idtool._fit._discrepancy import Conditioning
 from idtool._fit._free_levels import FreeLevels
+from idtool._fit._level_design import discrepancy_conditioning
 from idtool._fit._result import Estimate, FitResult
-from idtool._fit._variability import discrepancy_conditioning
 from idtool._model._benchmodel import BenchModel, bench_model
 from idtool._model._settings import ParameterSetting
 

@@ -51,8 +51,8 @@ import math
 import numpy as np
 import scipy.special
 
-from idtool._fit._discrepancy import Conditioning, correlation, length_scales, operating_coordinates
 from idtool._fit._free_levels import MIN_AT_LEVEL_S, FreeLevels, free_levels, model_log_levels
+from idtool._fit._level_design import level_design
 from idtool._fit._reml import GRID, at_sds, covariance, evaluate, fit_sds
 from idtool._fit._result import FitResult, estimate_of
 from idtool._model._benchmodel import BenchModel
@@ -61,11 +61,9 @@ from idtool._model._params import Param
 __all__ = [
     "MISFIT",
     "SD_PARAMS",
-    "LevelDesign",
     "Variability",
-    "discrepancy_conditioning",
+    "compile_variability",
     "estimate_variability",
-    "level_design",
     "with_variability",
 ]
 
@@ -148,61 +146,6 @@ class Variability:
 
 class NoMeasuredLevels(ValueError):
     """No trace measures its own friction ratio: the levels model has nothing to fit."""
-
-
-@dataclasses.dataclass(frozen=True)
-class LevelDesign:
-    """Layout of the levels model's data ``y`` (module docstring).
-
-    ``rows``: which of (log OFF per trace, log FR per trace) ``y`` holds; ``kinds``
-    (n, 2) one-hot OFF / FR rows; ``disc_corr`` (n, n) the discrepancy's correlation
-    between the FR rows (1 where they share an operating point; 0 in the OFF rows);
-    ``active`` which of :data:`SD_PARAMS` the data can inform (``scatter_fr`` only with
-    repeated operating points).
-    """
-
-    rows: np.ndarray
-    kinds: np.ndarray
-    disc_corr: np.ndarray
-    op: np.ndarray
-    active: np.ndarray
-
-    @property
-    def separable(self) -> bool:
-        return bool(self.active[1])
-
-
-def level_design(model: BenchModel, measured: np.ndarray) -> LevelDesign:
-    """The :class:`LevelDesign` of ``model``'s traces, ``measured`` their ON levels."""
-    m = model.data.n_traces
-    idx = np.flatnonzero(measured)
-    n = m + idx.size
-    kinds = np.zeros((n, 2))
-    kinds[:m, 0] = 1.0
-    kinds[m:, 1] = 1.0
-    op = np.asarray(model.data.op_index)[idx]
-    x = _measured_coordinates(model, measured)
-    disc_corr = np.zeros((n, n))
-    disc_corr[m:, m:] = np.asarray(correlation(x, x, length_scales(model.data)))
-    repeated = bool(op.size and np.any(np.bincount(op) >= 2))
-    active = np.array([True, repeated, op.size > 0])
-    return LevelDesign(np.concatenate([np.arange(m), m + idx]), kinds, disc_corr, op, active)
-
-
-def discrepancy_conditioning(model: BenchModel, free: FreeLevels) -> Conditioning:
-    """What predictions need to condition the discrepancy on the traces' own friction
-    ratios (:class:`~idtool._fit._discrepancy.Conditioning`)."""
-    m = free.off_n.size
-    x = _measured_coordinates(model, free.measured)
-    return Conditioning(x, free.y[m:], free.cov_y[m:, m:], length_scales(model.data))
-
-
-def _measured_coordinates(model: BenchModel, measured: np.ndarray) -> np.ndarray:
-    """Operating-point coordinates (:func:`operating_coordinates`) of the traces whose
-    ON level is ``measured``: the FR rows of the levels model, in trace order."""
-    d = model.data
-    op = np.asarray(d.op_index)[measured]
-    return np.asarray(operating_coordinates(d.op_load_n[op], d.op_alpha[op], d.op_speed_m_s[op]))
 
 
 def _spike_and_slab(grid: np.ndarray, likelihood: np.ndarray) -> np.ndarray:

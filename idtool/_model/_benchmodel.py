@@ -36,7 +36,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from idtool._data._blocks import FitData, start_values
+from idtool._data._blocks import FitData
+from idtool._data._start_values import start_values
 from idtool._fit._lm import ColouredJacobian, normal_equations
 from idtool._model._actuator import ACTUATORS, DEFAULT_ACTUATOR, AbstractActuator
 from idtool._model._bench import TraceTiming, on_friction_ratio

@@ -37,8 +37,8 @@ from jax.scipy.linalg import cho_solve
 
 from idtool._posterior._levels import LevelsTarget, _mean_and_cholesky
 from idtool._posterior._likelihood import Target, predict_blocks_batch, trace_logliks_batch
+from idtool._posterior._posterior import LEVELS, Posterior
 from idtool._posterior._ppc import replicate_blocks
-from idtool._posterior._sample import LEVELS, Posterior
 
 __all__ = ["MAX_DRAWS", "levels_groups", "model_check_groups", "noise_groups", "thinned_steps"]
 

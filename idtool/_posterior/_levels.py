@@ -27,7 +27,8 @@ from jax.scipy.linalg import cho_solve
 from jaxtyping import Array
 
 from idtool._fit._free_levels import FreeLevels
-from idtool._fit._variability import SD_PARAMS, level_design
+from idtool._fit._level_design import level_design
+from idtool._fit._variability import SD_PARAMS
 from idtool._model._benchmodel import BenchModel
 from idtool._model._params import Param
 from idtool._posterior._prior import Prior

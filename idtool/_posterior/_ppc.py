@@ -27,7 +27,7 @@ from idtool._posterior._likelihood import (
     physical_values,
     predict_blocks,
 )
-from idtool._posterior._sample import FitLike, Posterior
+from idtool._posterior._posterior import FitLike, Posterior
 
 __all__ = ["PredictiveCheck", "plot_predictive", "posterior_predictive", "replicate_blocks"]
 

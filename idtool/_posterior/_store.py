@@ -29,7 +29,7 @@ from idtool._atomic import atomic_file
 from idtool._errors import IdtoolError
 from idtool._posterior._diagnostics import import_arviz
 from idtool._posterior._groups import thinned_steps
-from idtool._posterior._sample import Posterior
+from idtool._posterior._posterior import Posterior
 
 __all__ = [
     "POSTERIOR_FILE",

@@ -21,7 +21,7 @@ import numpy as np
 from idtool._data._blocks import FitData
 from idtool._fit._discrepancy import Conditioning, discrepancy_moments, operating_coordinates
 from idtool._model._benchmodel import BenchModel
-from idtool._posterior._sample import Posterior
+from idtool._posterior._posterior import Posterior
 from idtool._posterior._store import PosteriorDraws
 
 SD_NAMES = ("discrepancy_fr", "scatter_fr")  # the sds a prediction uses
@@ -144,7 +144,7 @@ def draws_from_posterior(
     seed: int = 0,
     conditioning: Conditioning | None = None,
 ) -> Draws:
-    """Prediction draws from an in-memory :class:`~idtool._posterior._sample.Posterior`
+    """Prediction draws from an in-memory :class:`~idtool._posterior._posterior.Posterior`
     (kept draws, thinned evenly to ``max_draws``); the sds from the posterior, else
     from the fit's ``sd_grids``; the discrepancy conditioned on ``conditioning`` (default:
     the posterior's own)."""

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from idtool._atomic import atomic_output_dir
+from idtool._entry import load_fit
 from idtool._errors import IdtoolError
 from idtool._fit._variability import MISFIT
 from idtool._posterior._store import POSTERIOR_FILE
@@ -44,7 +45,7 @@ from idtool._predict._tables import amplitude_table
 from idtool._report._compare_html import SECTIONS, compare_html, prob
 from idtool._report._page import now_utc, options_bytes, report_id
 from idtool._version import __version__
-from idtool._workflow import Fit, load_fit
+from idtool._workflow import Fit
 
 __all__ = ["SECTIONS", "TARGETS", "ComparedFit", "Comparison", "compare_fits", "default_out"]
 

@@ -24,6 +24,7 @@ from idtool._fit._variability import MISFIT
 from idtool._posterior._store import POSTERIOR_FILE
 from idtool._predict._mixture import prediction_draws
 from idtool._report._answer import answer
+from idtool._report._html_validation import validation_banner, validation_section
 from idtool._report._page import (
     g,
     img,
@@ -78,77 +79,6 @@ def _variability_table(doc: dict) -> str:
         f"Lack of fit of the physical model: chi2 = {lof['chi2']:.1f} "
         f"on {lof['dof']} dof, p = {lof['p_value']:.3g}.</p>"
         + table(["sd", "estimate", "95%"], rows)
-    )
-
-
-def _validation_banner(folder: Path) -> str:
-    """A banner when held-out traces fall outside their 95% bands more often than
-    chance explains: fewer inside than the 2.5% quantile of Binomial(n, 0.95)."""
-    path = folder / "validation.json"
-    if not path.is_file():
-        return ""
-    v = json.loads(path.read_text())
-    inside = [t["inside"] for t in v["traces"] if t["inside"] is not None]
-    n, k = len(inside), sum(inside)
-    # P(at most k inside | n, 0.95): a lower tail under 2.5% is more than bad luck
-    from scipy.stats import binom
-
-    if n == 0 or binom.cdf(k, n, 0.95) >= 0.025:
-        return ""
-    text = (
-        f"Held-out validation: only {k} of {n} held-out traces lie inside their 95% "
-        "bands (chance alone would do this less than 2.5% of the time): the bands are "
-        "too narrow for this bench; see 'Held-out validation'."
-    )
-    return f'<p class="banner">{html.escape(text)}</p>'
-
-
-def _validation_section(folder: Path) -> str:
-    """``validation.json`` (``idtool validate-fit``) as a table, or what to run."""
-    path = folder / "validation.json"
-    if not path.is_file():
-        return (
-            "<p>No held-out validation yet: fit some traces (idtool fit --traces) and run "
-            "idtool validate-fit on the others, or on another session's dataset.</p>"
-        )
-    v = json.loads(path.read_text())
-    rows = []
-    for t in v["traces"]:
-        own = t["friction_ratio"]
-        meas = t["measured_ci95"]
-        rows.append(
-            [
-                t["id"],
-                g(t["normal_load_n"]),
-                f"{100 * t['amplitude_fraction']:.0f}%",
-                f"{t['fit_percent']:.1f}",
-                f"{t['rmse_n']:.3f}",
-                "-" if own is None else f"{own:.3f} ({t['friction_ratio_se']:.3f})",
-                "-" if meas is None else f"[{meas[0]:.3f}, {meas[1]:.3f}]",
-                {None: "-", True: "yes", False: "NO"}[t["inside"]],
-            ]
-        )
-    notes = "".join(f"<li>{html.escape(w)}</li>" for w in v.get("warnings", []))
-    return (
-        f"<p>{html.escape(v['summary'])}. Dataset {html.escape(v['dataset'])} (sha256 "
-        f"<code>{v['dataset_sha256'][:12]}</code>); bands from {html.escape(v['draws'])}. "
-        "Force fit %: 100 (1 - |y - y_hat| / |y - mean y|) with only the trace's own "
-        "nuisances fitted; the band: a new pull's FR as this trace measures it (its own "
-        "estimation error added).</p>"
-        + table(
-            [
-                "trace",
-                "load [N]",
-                "amplitude",
-                "force fit [%]",
-                "RMSE [N]",
-                "own FR (se)",
-                "95% band as measured",
-                "inside",
-            ],
-            rows,
-        )
-        + (f"<ul>{notes}</ul>" if notes else "")
     )
 
 
@@ -383,7 +313,7 @@ def write_report(
             "tested loads).</p>" + img(apath, "amplitude map")
         )
 
-        sec["Held-out validation"] = _validation_section(folder)
+        sec["Held-out validation"] = validation_section(folder)
         sec["Model comparison"] = f"<p>{html.escape(doc['choice'])}</p>" + table(
             ["model", "AIC", "BIC", "log L", "parameters"],
             [
@@ -424,7 +354,7 @@ def write_report(
         md += ["", f"Dataset sha256 {ds.sha256}; fit command `{doc['command']}`"]
 
     title = f"idtool report: {fit.dataset.name}"
-    banners = _banners(doc, meta, first.extrapolation) + _validation_banner(folder)
+    banners = _banners(doc, meta, first.extrapolation) + validation_banner(folder)
     document = page(title, _header(fit, meta, rid), banners, {n: sec[n] for n in SECTIONS})
     out = write_text_atomic(folder / "report.html", document)
     write_text_atomic(folder / "report.md", "\n".join(md) + "\n")

@@ -21,8 +21,8 @@ from idtool._posterior._levels import (
     levels_predictive,
 )
 from idtool._posterior._likelihood import Target, build_target, conditioning_shrinkage
+from idtool._posterior._posterior import LEVELS, FitLike, Posterior
 from idtool._posterior._ppc import PredictiveCheck, plot_predictive, posterior_predictive
-from idtool._posterior._sample import LEVELS, FitLike, Posterior
 from idtool._posterior._store import write_posterior
 from idtool._provenance import provenance
 from idtool._version import __version__

@@ -1,0 +1,123 @@
+"""The entry points of the public workflow: :func:`fit` a dataset into a
+:class:`~idtool.Fit`, or :func:`load_fit` one saved by :meth:`Fit.save`."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+
+from idtool._data._dataset import Dataset, load_dataset
+from idtool._errors import IdtoolError
+from idtool._fit._parameter_table import parse_fix, read_parameter_table
+from idtool._fit._run import fit_dataset
+from idtool._fit._store import load_stored_fit
+from idtool._model._noise import DEFAULT_NOISE
+from idtool._model._settings import ParameterSetting
+from idtool._predict._validation import select_traces
+from idtool._workflow import Fit
+
+__all__ = ["fit", "load_fit"]
+
+
+def fit(
+    dataset: Dataset | str | os.PathLike,
+    *,
+    law: str = "dahl",
+    coupling: str = "power-limited",
+    noise: str = DEFAULT_NOISE,
+    seed: int = 0,
+    starts: int = 8,
+    compare_laws: bool = False,
+    profile: bool = False,
+    mains_hz: float | None = None,
+    variability: bool = True,
+    actuator: str = "auto",
+    offset: str = "auto",
+    progress: Callable[[str], None] | None = None,
+    traces: str | Sequence[str] | None = None,
+    fix: Mapping[str, float] | None = None,
+    parameters: str | os.PathLike | Sequence[ParameterSetting] | None = None,
+) -> Fit:
+    """Identify Kt, mu and the coupling from every trace of ``dataset`` (or those
+    ``traces`` selects) at once.
+
+    Args:
+        dataset: a :class:`~idtool.Dataset` or the path of a v1 dataset folder.
+        law: friction law, a name of :data:`idtool.FRICTION_LAWS` ("dahl", "lugre").
+        coupling: a name of :data:`idtool.COUPLINGS`, or "auto" (fit every coupling
+            law, keep the lowest BIC).
+        noise: a name of :data:`idtool.NOISE_MODELS` (default "ar1").
+        seed: seeds the multi-start points; the same seed gives the same fit.
+        starts: multi-start points.
+        compare_laws: also fit every other friction law and rank them by BIC.
+        profile: profile-likelihood intervals of the physical parameters.
+        mains_hz: mains frequency [Hz]: block means span whole mains periods. None
+            (default): ``rig.mains_frequency_hz`` of the dataset, else the hum found in
+            the traces, else 50 Hz; the choice and its source are in ``fit.json``
+            (``noise.mains_hz``, ``noise.mains_source``), a doubt in ``Fit.warnings``.
+        variability: pull-to-pull scatter (of mu and of the friction ratio) and the
+            physical model's discrepancy across operating points in every interval and
+            band (default; estimated by REML, reported in ``fit.json``'s
+            ``variability``). False gives the noise-only model, for comparison.
+        actuator: how the pull force follows its target, a name of
+            :data:`idtool.ACTUATORS` ("slope": constant slopes; "lag": a first-order lag
+            with a rate limit), or "auto" (default: both, the lower BIC kept).
+        offset: the load-cell offset within a trace, a name of :data:`idtool.OFFSETS`
+            ("constant"; "drift": a linear drift per trace), or "auto" (default: both,
+            the lower BIC kept).
+        progress: called with a line of text as each stage of the fit starts (each
+            candidate model, the interval checks, the levels model); ``print`` shows
+            them.
+        traces: fit only the traces whose ids match these shell patterns (a list, or
+            comma-separated; ``!`` excludes: ``"*,!*_T2.5"``), to hold the others out
+            for :meth:`Fit.validate`; ``fit.json`` lists the fitted traces.
+        fix: shared parameters held at a value, by name, physical units
+            (``{"mu": 0.3}``): not estimated, not sampled, not counted in AIC/BIC.
+        parameters: a PEtab-like parameter table (path; :func:`idtool.read_parameter_table`)
+            or its settings (:class:`idtool.ParameterSetting`): fixed values, bounds,
+            scales, starts and the sampler's priors. ``fit.json`` records them, so
+            :func:`load_fit` and :meth:`Fit.sample` use them too.
+    """
+    if starts < 1:
+        raise IdtoolError(f"starts = {starts}: give at least 1")
+    started = time.perf_counter()
+    if not isinstance(dataset, Dataset):
+        dataset = load_dataset(Path(dataset))
+    if traces is not None:
+        dataset = select_traces(dataset, traces)
+    settings: tuple[ParameterSetting, ...] = ()
+    if isinstance(parameters, str | os.PathLike):
+        settings = read_parameter_table(parameters)
+    elif parameters is not None:
+        settings = tuple(parameters)
+    if fix:
+        settings += parse_fix(f"{name}={value}" for name, value in fix.items())
+    run = fit_dataset(
+        dataset,
+        law=law,
+        coupling=coupling,
+        seed=seed,
+        n_starts=starts,
+        compare_laws=compare_laws,
+        profile=profile,
+        mains_hz=mains_hz,
+        noise=noise,
+        variability=variability,
+        actuator=actuator,
+        offset=offset,
+        progress=progress,
+        settings=settings,
+    )
+    out = Fit(dataset, run.chosen, run)
+    out.seconds = time.perf_counter() - started
+    return out
+
+
+def load_fit(path: str | os.PathLike) -> Fit:
+    """Read a fit folder written by :meth:`Fit.save` (or ``idtool fit``), with its
+    posterior if ``posterior.nc`` is beside it. The dataset must still be where the fit
+    found it, unchanged (its sha256 is checked)."""
+    stored = load_stored_fit(Path(path))
+    return Fit(stored.dataset, stored, None, Path(path))

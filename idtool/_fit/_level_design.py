@@ -1,0 +1,75 @@
+"""The levels model's data layout (:mod:`idtool._fit._variability`): which per-trace log
+levels it holds, which sds they inform, and how the discrepancy correlates them; and what
+predictions need to condition the discrepancy on the traces' own friction ratios."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from idtool._fit._discrepancy import (
+    Conditioning,
+    correlation,
+    length_scales,
+    operating_coordinates,
+)
+from idtool._fit._free_levels import FreeLevels
+from idtool._model._benchmodel import BenchModel
+
+__all__ = ["LevelDesign", "discrepancy_conditioning", "level_design"]
+
+
+@dataclasses.dataclass(frozen=True)
+class LevelDesign:
+    """Layout of the levels model's data ``y`` (module docstring).
+
+    ``rows``: which of (log OFF per trace, log FR per trace) ``y`` holds; ``kinds``
+    (n, 2) one-hot OFF / FR rows; ``disc_corr`` (n, n) the discrepancy's correlation
+    between the FR rows (1 where they share an operating point; 0 in the OFF rows);
+    ``active`` which of :data:`SD_PARAMS` the data can inform (``scatter_fr`` only with
+    repeated operating points).
+    """
+
+    rows: np.ndarray
+    kinds: np.ndarray
+    disc_corr: np.ndarray
+    op: np.ndarray
+    active: np.ndarray
+
+    @property
+    def separable(self) -> bool:
+        return bool(self.active[1])
+
+
+def level_design(model: BenchModel, measured: np.ndarray) -> LevelDesign:
+    """The :class:`LevelDesign` of ``model``'s traces, ``measured`` their ON levels."""
+    m = model.data.n_traces
+    idx = np.flatnonzero(measured)
+    n = m + idx.size
+    kinds = np.zeros((n, 2))
+    kinds[:m, 0] = 1.0
+    kinds[m:, 1] = 1.0
+    op = np.asarray(model.data.op_index)[idx]
+    x = _measured_coordinates(model, measured)
+    disc_corr = np.zeros((n, n))
+    disc_corr[m:, m:] = np.asarray(correlation(x, x, length_scales(model.data)))
+    repeated = bool(op.size and np.any(np.bincount(op) >= 2))
+    active = np.array([True, repeated, op.size > 0])
+    return LevelDesign(np.concatenate([np.arange(m), m + idx]), kinds, disc_corr, op, active)
+
+
+def discrepancy_conditioning(model: BenchModel, free: FreeLevels) -> Conditioning:
+    """What predictions need to condition the discrepancy on the traces' own friction
+    ratios (:class:`~idtool._fit._discrepancy.Conditioning`)."""
+    m = free.off_n.size
+    x = _measured_coordinates(model, free.measured)
+    return Conditioning(x, free.y[m:], free.cov_y[m:, m:], length_scales(model.data))
+
+
+def _measured_coordinates(model: BenchModel, measured: np.ndarray) -> np.ndarray:
+    """Operating-point coordinates (:func:`operating_coordinates`) of the traces whose
+    ON level is ``measured``: the FR rows of the levels model, in trace order."""
+    d = model.data
+    op = np.asarray(d.op_index)[measured]
+    return np.asarray(operating_coordinates(d.op_load_n[op], d.op_alpha[op], d.op_speed_m_s[op]))
