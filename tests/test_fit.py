@@ -15,8 +15,8 @@ from scipy.integrate import solve_ivp
 
 import idtool
 from idtool._cli._main import main
-from idtool._data._blocks import prepare_fit_data
-from idtool._fit._fit import prediction_at, run_lm
+from idtool._data._blocks import padded_size, prepare_fit_data
+from idtool._fit._fit import lm_program, prediction_at, run_lm
 from idtool._fit._reml import evaluate, fit_sds
 from idtool._fit._run import fit_dataset
 from idtool._model._benchmodel import bench_model
@@ -84,27 +84,46 @@ def test_prediction_from_the_fits_program_is_the_models(example_run):
     np.testing.assert_allclose(w, want, atol=1e-9)
 
 
-def test_another_dataset_of_the_same_shape_runs_the_same_compiled_program(example_run):
+def test_another_dataset_of_about_the_same_length_runs_the_same_compiled_program(example_run):
     """A dataset's names, hash and notes are not part of the compiled programs' keys
-    (DataLabels compare equal): another bench of the same shape is neither traced nor
-    compiled again, and its own data (not the first one's) go in."""
+    (DataLabels compare equal), and its blocks are padded to a bucketed count
+    (padded_size): another bench with other names and other trace lengths is neither
+    traced nor compiled again, its own data (not the first one's) go in, and the padding
+    changes no residual."""
     dataset = idtool.load_dataset(idtool.example_dataset_path())
-    traces = tuple(
-        dataclasses.replace(tr, id=f"{tr.id}_b", force_n=1.01 * tr.force_n) for tr in dataset.traces
-    )
+
+    def other_bench(i, tr):  # 1% more force; the last 0.1 s of every other trace cut
+        keep = slice(None, -100) if i % 2 else slice(None)
+        return dataclasses.replace(
+            tr,
+            id=f"{tr.id}_b",
+            time_s=tr.time_s[keep],
+            force_n=1.01 * tr.force_n[keep],
+            ultrasound_on=tr.ultrasound_on[keep],
+        )
+
+    traces = tuple(other_bench(i, tr) for i, tr in enumerate(dataset.traces))
     other = dataclasses.replace(dataset, name="another bench", sha256="0" * 64, traces=traces)
     data = example_run.data
     model = bench_model(data)
     twin = bench_model(prepare_fit_data(other, mains_hz=data.mains_hz, periods_per_block=2))
     assert twin.data.trace_ids != model.data.trace_ids
+    assert twin.data.n_blocks < model.data.n_blocks
+    assert padded_size(twin.data.n_blocks) == padded_size(model.data.n_blocks)
     z = np.asarray(model.z0())
     mask = np.ones(z.size, bool)
     first = run_lm(model, z, mask, 0.0, 0)
-    size = run_lm._cache_size()
+    size = lm_program._cache_size()
     second = run_lm(twin, z, mask, 0.0, 0)
-    assert run_lm._cache_size() == size
+    assert lm_program._cache_size() == size
+    assert np.asarray(second.residuals).size == twin.data.n_blocks
+    # the padded program's residuals are the model's own, unpadded
+    want = np.asarray(jax.jit(lambda m, z: m.residuals(z, 0.0))(twin, z))
+    np.testing.assert_allclose(np.asarray(second.residuals), want, atol=1e-9)
+    assert float(second.loss) == pytest.approx(0.5 * float(want @ want), rel=1e-12)
     # every force 1% larger (a constant shift would go into the offsets' centres)
-    assert not np.allclose(np.asarray(first.residuals), np.asarray(second.residuals))
+    n = twin.data.n_blocks
+    assert not np.allclose(np.asarray(first.residuals)[:n], np.asarray(second.residuals))
 
 
 def test_the_programs_compiled_ahead_are_the_ones_the_fit_runs():
@@ -114,7 +133,7 @@ def test_the_programs_compiled_ahead_are_the_ones_the_fit_runs():
     jax.clear_caches()
     run = fit_dataset(idtool.load_dataset(idtool.example_dataset_path()), seed=0)
     assert len(run.candidates) == 3  # slope, lag; drifting offset on the best
-    assert run_lm._cache_size() == len(run.candidates)
+    assert lm_program._cache_size() == len(run.candidates)
     assert fit_sds._cache_size() == 1
     assert evaluate._cache_size() == 1
 

@@ -27,6 +27,7 @@ __all__ = [
     "DataLabels",
     "FitData",
     "block_layout",
+    "padded_size",
     "prepare_fit_data",
     "residual_hum_fraction",
 ]
@@ -84,6 +85,8 @@ class FitData(eqx.Module):
     op_load_n: np.ndarray
     op_alpha: np.ndarray
     op_speed_m_s: np.ndarray
+    # 1 per block; 0 for the blocks padded() appends (their residuals are zeroed)
+    block_weight: np.ndarray
     # the rig's transducer block (for the sdof coupling law), None when not given
     transducer: TransducerSpec | None = eqx.field(static=True, default=None)
 
@@ -118,6 +121,34 @@ class FitData(eqx.Module):
     @property
     def n_traces(self) -> int:
         return self.normal_load_n.shape[0]
+
+    def padded(self, n_blocks: int) -> FitData:
+        """These data with blocks appended up to ``n_blocks``, of weight 0: each at the
+        last block's time, of the last trace, a trace start of its own (so no AR(1)
+        term reaches across), force 0. A model multiplies its residuals by
+        ``block_weight``, so the padding changes no residual sum, Jacobian or normal
+        equation; datasets of similar length then share compiled programs
+        (:func:`padded_size`)."""
+        extra = n_blocks - self.force_n.shape[0]
+        if extra < 0:
+            raise ValueError(f"n_blocks = {n_blocks}: below the {self.force_n.shape[0]} blocks")
+        if extra == 0:
+            return self
+
+        def pad(x: np.ndarray, value) -> np.ndarray:
+            x = np.asarray(x)
+            fill = np.broadcast_to(np.asarray(value, x.dtype), (extra, *x.shape[1:]))
+            return np.concatenate([x, fill])
+
+        return dataclasses.replace(
+            self,
+            block_trace=pad(self.block_trace, self.n_traces - 1),
+            block_time_s=pad(self.block_time_s, self.block_time_s[-1]),
+            sub_time_s=pad(self.sub_time_s, self.sub_time_s[-1]),
+            force_n=pad(self.force_n, 0.0),
+            first=pad(self.first, True),
+            block_weight=pad(self.block_weight, 0.0),
+        )
 
     @property
     def n_blocks(self) -> int:
@@ -171,6 +202,16 @@ class BlockLayout:
     period_miss: float
     residual_hum_fraction: float
     whole: bool
+
+
+def padded_size(n_blocks: int) -> int:
+    """The block count a fit's compiled programs take for ``n_blocks`` blocks: rounded
+    up to a multiple of 1/8 of the largest power of two below it (at least 16), so at
+    most 12.5% padding from 128 blocks on. Two benches' traces rarely have the same
+    length (the pull's start-up lasts mu N / slope: another mu, other lengths), and
+    every length was a program compiled anew (~1.2 s per candidate model, cold)."""
+    quantum = max(16, 2 ** max(int(n_blocks).bit_length() - 4, 0))
+    return -(-int(n_blocks) // quantum) * quantum
 
 
 def residual_hum_fraction(block_samples: int, sample_rate_hz: float, mains_hz: float) -> float:
@@ -361,6 +402,7 @@ def prepare_fit_data(
         op_load_n=unique[:, 0],
         op_alpha=unique[:, 1],
         op_speed_m_s=unique[:, 2],
+        block_weight=np.ones(int(counts.sum())),
         block_size=block_sizes[0],
         # The real duration (samples / rate) of the first trace's blocks, to 12 digits:
         # the rate is one over a median time step, exact to about 1e-15 only.

@@ -24,10 +24,11 @@ from __future__ import annotations
 import functools
 import math
 
+import equinox as eqx
 import jax
 import numpy as np
 
-from idtool._data._blocks import FitData
+from idtool._data._blocks import FitData, padded_size
 from idtool._fit._lm import LMResult, levenberg_marquardt
 from idtool._fit._result import Estimate, FitResult, estimate_of
 from idtool._model._actuator import DEFAULT_ACTUATOR
@@ -38,6 +39,7 @@ from idtool._model._settings import ParameterSetting
 
 __all__ = [
     "fit_model",
+    "lm_arguments",
     "lm_program",
     "prediction_at",
     "quasi_random",
@@ -56,20 +58,31 @@ _COMPILE = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_leve
 
 
 @functools.partial(jax.jit, compiler_options=_COMPILE)
-def run_lm(model: BenchModel, z0, mask, phi, max_steps) -> LMResult:
-    """Levenberg-Marquardt on the AR(1)-whitened residuals of ``model``
-    (:meth:`BenchModel.normal_equations`) over the parameters in ``mask``, returning
-    them with the per-trace levels. The model is an argument, not a constant: one
-    compiled program serves every start, polish, AR(1) round, profile point and every
-    dataset of the same shape and laws."""
+def lm_program(model: BenchModel, z0, mask, phi, max_steps) -> LMResult:
+    """The compiled program of :func:`run_lm` (its model already padded)."""
     return levenberg_marquardt(model.normal_equations, z0, phi, mask, max_steps)
 
 
-def lm_program(model: BenchModel) -> tuple:
-    """:func:`run_lm` and arguments of the types its calls for ``model`` take (for
-    compiling ahead: :class:`~idtool._fit._prefetch.CompileAhead`)."""
+def run_lm(model: BenchModel, z0, mask, phi, max_steps) -> LMResult:
+    """Levenberg-Marquardt on the AR(1)-whitened residuals of ``model``
+    (:meth:`BenchModel.normal_equations`) over the parameters in ``mask``, returning
+    them with the per-trace levels. The model is an argument, not a constant, and its
+    blocks are padded to :func:`~idtool._data._blocks.padded_size` (residuals 0 there,
+    cut off again here): one compiled program serves every start, polish, AR(1) round,
+    profile point and every dataset of about the same length and the same laws."""
+    n = model.data.force_n.shape[0]
+    out = lm_program(model.padded(padded_size(n)), z0, mask, phi, max_steps)
+    # cut in NumPy: a JAX slice would be one more program to compile for every n
+    return eqx.tree_at(lambda o: o.residuals, out, np.asarray(out.residuals)[:n])
+
+
+def lm_arguments(model: BenchModel) -> tuple:
+    """Arguments of :func:`lm_program` of the types :func:`run_lm`'s calls for ``model``
+    give it, its blocks padded (for compiling ahead:
+    :class:`~idtool._fit._prefetch.CompileAhead`)."""
     z = np.asarray(model.z0(), float)
-    return run_lm, (model, z, np.ones(z.size, bool), 0.0, 0)
+    padded = model.padded(padded_size(model.data.force_n.shape[0]))
+    return (padded, z, np.ones(z.size, bool), 0.0, 0)
 
 
 def prediction_at(model: BenchModel, z: np.ndarray, phi: float) -> tuple[np.ndarray, np.ndarray]:

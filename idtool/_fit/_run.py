@@ -34,7 +34,7 @@ from idtool._fit._detuning import (
     detuning_profile,
     detuning_sentence,
 )
-from idtool._fit._fit import fit_model, lm_program
+from idtool._fit._fit import fit_model, lm_arguments, lm_program
 from idtool._fit._intervals import Profile, check_intervals, profile_parameter
 from idtool._fit._prefetch import CompileAhead
 from idtool._fit._result import FitResult
@@ -306,8 +306,7 @@ def _compile_lm(data: FitData, names: tuple[str, str, str, str], noise: str, set
     """Compile the Levenberg-Marquardt program of the model ``names`` (law, coupling,
     actuator, offset)."""
     lw, cp, ac, of = names
-    fn, args = lm_program(bench_model(data, lw, cp, noise, ac, of, settings))
-    fn.lower(*args).compile()
+    lm_program.lower(*lm_arguments(bench_model(data, lw, cp, noise, ac, of, settings))).compile()
 
 
 def check_settings(

@@ -28,6 +28,7 @@ sampler adds the noise model's ``params`` after the shared ones.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 
 import equinox as eqx
@@ -151,6 +152,15 @@ class BenchModel(eqx.Module):
             [np.full(self.n_shared, -1), np.tile(np.arange(n), len(self.trace_groups))]
         )
 
+    def padded(self, n_blocks: int) -> BenchModel:
+        """This model on its data padded to ``n_blocks`` blocks (:meth:`FitData.padded`):
+        the same residuals, then zeros; the same normal equations."""
+        if n_blocks == self.data.force_n.shape[0]:
+            return self
+        data = self.data.padded(n_blocks)
+        structure = dataclasses.replace(self.level_structure, row_group=data.block_trace)
+        return dataclasses.replace(self, data=data, level_structure=structure)
+
     def values(self, z: Float[Array | np.ndarray, " p"]) -> dict[str, Array]:
         """Physical values: shared names map to scalars, per-trace groups to arrays
         (NumPy for a NumPy ``z``, JAX otherwise: :mod:`idtool._model._xp`)."""
@@ -246,8 +256,11 @@ class BenchModel(eqx.Module):
         return self.block_means(off, on, v)
 
     def residuals(self, z: Float[Array, " p"], phi: float | Array = 0.0) -> Array:
-        """AR(1)-whitened residuals (:func:`idtool._model._noise.whiten`) of the model."""
-        return whiten(self.predict(z) - self.data.force_n, jnp.asarray(self.data.first), phi)
+        """AR(1)-whitened residuals (:func:`idtool._model._noise.whiten`) of the model;
+        0 at padded blocks (:meth:`FitData.padded`)."""
+        d = self.data
+        w = whiten(self.predict(z) - d.force_n, jnp.asarray(d.first), phi)
+        return w * jnp.asarray(d.block_weight)
 
     def level_residuals(
         self, u: Float[Array, " q"], z: Float[Array, " p"], phi: float | Array
@@ -257,7 +270,8 @@ class BenchModel(eqx.Module):
         k, m = self.n_physical, self.data.n_traces
         v = self.values(jnp.concatenate([z[:k], u[2 * m :]]))
         e = self.block_means(u[:m], u[m : 2 * m], v) - self.data.force_n
-        return whiten(e, jnp.asarray(self.data.first), phi)
+        # 0 at padded blocks (FitData.padded): no residual, no Jacobian row
+        return whiten(e, jnp.asarray(self.data.first), phi) * jnp.asarray(self.data.block_weight)
 
     def normal_equations(
         self, z: Float[Array, " p"], phi: float | Array
