@@ -71,7 +71,7 @@ def run_lm(model: BenchModel, z0, mask, phi, max_steps) -> LMResult:
     cut off again here): one compiled program serves every start, polish, AR(1) round,
     profile point and every dataset of about the same length and the same laws."""
     n = model.data.force_n.shape[0]
-    out = lm_program(model.padded(padded_size(n)), z0, mask, phi, max_steps)
+    out = lm_program(_padded(model), z0, mask, phi, max_steps)
     # cut in NumPy: a JAX slice would be one more program to compile for every n
     return eqx.tree_at(lambda o: o.residuals, out, np.asarray(out.residuals)[:n])
 
@@ -81,8 +81,12 @@ def lm_arguments(model: BenchModel) -> tuple:
     give it, its blocks padded (for compiling ahead:
     :class:`~idtool._fit._prefetch.CompileAhead`)."""
     z = np.asarray(model.z0(), float)
-    padded = model.padded(padded_size(model.data.force_n.shape[0]))
-    return (padded, z, np.ones(z.size, bool), 0.0, 0)
+    return (_padded(model), z, np.ones(z.size, bool), 0.0, 0)
+
+
+def _padded(model: BenchModel) -> BenchModel:
+    """``model`` on its blocks padded to :func:`~idtool._data._blocks.padded_size`."""
+    return model.padded(padded_size(model.data.force_n.shape[0]))
 
 
 def prediction_at(model: BenchModel, z: np.ndarray, phi: float) -> tuple[np.ndarray, np.ndarray]:

@@ -17,7 +17,6 @@ from __future__ import annotations
 import concurrent.futures
 import logging
 from collections.abc import Callable
-from typing import Any
 
 __all__ = ["CompileAhead"]
 
@@ -30,13 +29,7 @@ class CompileAhead:
     exit the work not started is dropped and the running compilation awaited."""
 
     def __init__(self) -> None:
-        self._pool = concurrent.futures.ThreadPoolExecutor(2, thread_name_prefix="idtool-compile")
-
-    def program(self, jitted: Any, *args: Any) -> None:
-        """Compile ``jitted`` (a ``jax.jit`` function) for arguments like ``args``
-        (same types, shapes and static values as the later call; the values do not
-        matter)."""
-        self.call(lambda: jitted.lower(*args).compile())
+        self._pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="idtool-compile")
 
     def call(self, work: Callable[[], object]) -> None:
         """Run ``work`` in the thread (it prepares and compiles programs)."""
