@@ -16,6 +16,10 @@ First with an empty cache folder (cold: what a new user waits), then three times
 it warm (a repeated fit of a dataset of the same shape). Also ``import idtool`` alone
 against ``import jax`` alone (the floor).
 
+Then the same command through the console script with an idtool server running
+(``idtool server start``, :mod:`idtool._cli._server`), end to end as a shell sees it:
+the first fit in the server (it traces the programs once) and the repeated ones.
+
     python benchmarks/bench_first_result.py [--repeat 3]
 
 There is no SciPy side to this one: it breaks down idtool's own time to a first result
@@ -93,6 +97,33 @@ def import_time(module: str, repeat: int) -> float:
     return min(times)
 
 
+def server_runs(cache: str, root: Path, repeat: int) -> list[float]:
+    """Wall times of ``idtool fit`` of the example through a server: the first, then
+    ``repeat`` more (each with its own output folder)."""
+    import idtool
+
+    idtool_bin = str(Path(sys.executable).with_name("idtool"))
+    env = os.environ | {"IDTOOL_CACHE_DIR": cache, "IDTOOL_SERVER_DIR": str(root / "srv")}
+    env.pop("IDTOOL_SERVER", None)
+    subprocess.run([idtool_bin, "server", "start"], env=env, check=True, capture_output=True)
+    try:
+        times = []
+        for i in range(1 + repeat):
+            out = str(root / f"server{i}")
+            command = [idtool_bin, "fit", str(idtool.example_dataset_path()), "--out", out, "-q"]
+            t0 = time.perf_counter()
+            subprocess.run(command, env=env, check=True)
+            times.append(time.perf_counter() - t0)
+        status = subprocess.run(
+            [idtool_bin, "server", "status", "--json"], env=env, check=True, capture_output=True
+        )
+        served = sum(s["served"] for s in json.loads(status.stdout)["servers"])
+        assert served == 1 + repeat, f"the server ran {served} of {1 + repeat} fits"
+        return times
+    finally:
+        subprocess.run([idtool_bin, "server", "stop"], env=env, check=True, capture_output=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3, help="warm runs (default 3)")
@@ -102,6 +133,7 @@ def main() -> None:
         cache = str(root / "cache")
         cold = run_once(cache, root / "fit0")
         warm = [run_once(cache, root / f"fit{i + 1}") for i in range(args.repeat)]
+        served = server_runs(cache, root, args.repeat)
     names = list(cold["phases"])
     print(f"idtool fit of the example dataset, fresh interpreters (cpus: {os.cpu_count()})")
     print(f"{'phase':28s}{'cold [s]':>10s}{'warm median [s]':>18s}")
@@ -124,6 +156,11 @@ def main() -> None:
     print(f"{'wall, with interpreter':28s}{cold['wall']:10.2f}{wall_w:18.2f}")
     kts = {round(r["Kt"], 3) for r in [cold, *warm]}
     print(f"Kt identical across runs: {len(kts) == 1}")
+    print(
+        f"through 'idtool server start': first fit {served[0]:.2f} s, repeated "
+        f"{statistics.median(served[1:]):.2f} s (median of {len(served) - 1}; "
+        f"{', '.join(f'{t:.2f}' for t in served[1:])}), wall, end to end"
+    )
     n = max(3, args.repeat)
     print(
         f"import idtool {import_time('idtool', n):.2f} s; import jax {import_time('jax', n):.2f} s"

@@ -111,3 +111,23 @@ def test_seed_study_refuses_to_overwrite_without_force(seed_study_dir, capsys):
     assert main(["seed-study", "--out", str(seed_study_dir)]) == 2
     assert "--force" in capsys.readouterr().err
     assert (seed_study_dir / "seed_study.csv").read_bytes() == before
+
+
+def test_only_a_console_process_freezes_its_imports_and_only_once():
+    """``load_numerics`` exempts the imports from the garbage collector in the console
+    script's process (a one-command process), never in a Python session calling
+    ``main`` (frozen cyclic garbage would never be freed there), and once."""
+    code = """
+import gc
+from idtool._cli import _args
+_args.load_numerics()
+session = gc.get_freeze_count()
+_args.freeze_on_load = True
+_args.load_numerics()
+console = gc.get_freeze_count()
+junk = [[i] for i in range(1000)]
+_args.load_numerics()
+print(session, console > 100_000, gc.get_freeze_count() == console)
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["0", "True", "True"]

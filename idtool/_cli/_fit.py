@@ -8,12 +8,13 @@ import time
 from pathlib import Path
 
 from idtool._atomic import refuse_existing
-from idtool._cli._args import add_law_argument, registry_names
+from idtool._cli._args import add_law_argument, load_numerics, registry_names
 
 __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
+    load_numerics()  # first: the collector then skips what it imports
     import idtool
 
     started = time.perf_counter()

@@ -43,6 +43,7 @@ _COMMANDS = (
     "_report",
     "_compare",
     "_demo",
+    "_server",
 )
 
 
@@ -138,5 +139,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
 
 
+def console() -> int:
+    """Entry point of the ``idtool`` console script: the command runs in this
+    installation's idtool server if one is running and free (``idtool server start``;
+    :mod:`idtool._cli._client`), else in this interpreter (:func:`main`)."""
+    from idtool._cli import _args
+    from idtool._cli._client import ServerGone, forward
+
+    argv = sys.argv[1:]
+    try:
+        code = forward(argv)
+    except ServerGone as err:
+        print(f"idtool: {err}", file=sys.stderr)
+        return 1
+    if code is not None:
+        return code
+    _args.freeze_on_load = True  # a process of one command (load_numerics)
+    return main(argv)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(console())

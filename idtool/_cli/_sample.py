@@ -7,6 +7,7 @@ import sys
 import time
 from pathlib import Path
 
+from idtool._cli._args import load_numerics
 from idtool._cli._main import EXIT_INTERRUPTED, EXIT_NOT_CONVERGED
 from idtool._errors import IdtoolError
 
@@ -14,6 +15,7 @@ __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
+    load_numerics()  # first: the collector then skips what it imports
     import idtool
     from idtool._posterior._sample import CHAIN_FILE
     from idtool._report._sample_text import POSTERIOR_FILES

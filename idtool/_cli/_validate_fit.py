@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from idtool._atomic import refuse_existing, write_text_atomic
+from idtool._cli._args import load_numerics
 
 __all__ = ["VALIDATION_FILE", "register"]
 
@@ -14,6 +15,7 @@ VALIDATION_FILE = "validation.json"
 
 
 def _run(args: argparse.Namespace) -> int:
+    load_numerics()  # first: the collector then skips what it imports
     import idtool
 
     out = Path(args.fit) / VALIDATION_FILE

@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import functools
 import math
+import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import equinox as eqx
 import jax
@@ -226,11 +228,13 @@ def fit_model(
     base = model.z0()
     everything = np.ones(base.size, bool)
     count = {"steps": 0, "jacobians": 0}
+    counting = threading.Lock()
 
     def run(z, mask, phi, max_steps):
         out = run_lm(model, np.asarray(z, float), mask, phi, max_steps)
-        count["steps"] += int(out.steps)
-        count["jacobians"] += int(out.n_jacobians)
+        with counting:  # the multi-start runs in two threads
+            count["steps"] += int(out.steps)
+            count["jacobians"] += int(out.n_jacobians)
         return out
 
     if start_from is not None:
@@ -255,7 +259,7 @@ def fit_model(
     # costs the same whichever parameters move, and joint end points rank basins by
     # their real loss: held nuisances ranked a spurious low-Kt basin first on two-load
     # designs (nuisance misfit was ~60x the final loss there).
-    points, ends = [], []
+    points: list[dict] = []
     # every physical parameter fixed or started by the user: one start is the fit
     varied = [
         p
@@ -264,12 +268,18 @@ def fit_model(
         or (p.name == model.coupling.gain_param and p.name not in _user_started(model))
     ]
     cube = quasi_random(n_starts, k, seed) if varied else np.zeros((1, k))
-    for u in cube:
-        start = _start_point(model, u)
+    starts = [_start_point(model, u) for u in cube]
+    zs = []
+    for start in starts:
         z = base.copy()
         z[:k] = model.z0(**start)[:k]
-        out = run(z, everything, 0.0, _MULTISTART_STEPS)
-        ends.append(out)
+        zs.append(z)
+    # two at a time: the program runs while the other thread waits for its result,
+    # and the starts are independent (same end points in any order; 0.58 s against
+    # 0.68 s for the example's 8 starts on 2 cores)
+    with ThreadPoolExecutor(2) as pool:
+        ends = list(pool.map(lambda z: run(z, everything, 0.0, _MULTISTART_STEPS), zs))
+    for start, out in zip(starts, ends, strict=True):
         points.append(
             {
                 "z": np.asarray(out.z)[:k],
