@@ -39,7 +39,7 @@ imports and JIT compilation all count):
 2. the matched polish alone: all (102) parameters from idtool's multi-start optimum (the
    nuisances at their start values, where ``fit_model`` starts its polish) with phi
    fixed at idtool's final value; idtool runs its own compiled Levenberg-Marquardt
-   (``idtool._fit._fit.run_lm``), SciPy ``least_squares`` as above.
+   (``idtool._fit._program.run_lm``), SciPy ``least_squares`` as above.
 
 In-process it also measures idtool's warm ``fit_model`` (a second call on the same
 data: its compiled programs are reused), the cost of one jitted residual evaluation, of
@@ -132,7 +132,7 @@ import json, sys
 import jax.numpy as jnp
 import idtool
 from idtool._data._blocks import prepare_fit_data
-from idtool._fit._fit import run_lm
+from idtool._fit._program import run_lm
 from idtool._model._benchmodel import bench_model
 
 job = json.load(open(sys.argv[2]))
@@ -524,8 +524,9 @@ def main(repeat: int = 1) -> None:
 
     import idtool
     from idtool._data._blocks import prepare_fit_data
-    from idtool._fit._fit import _COMPILE, fit_model, quasi_random, run_lm
+    from idtool._fit._fit import fit_model, quasi_random
     from idtool._fit._lm import levenberg_marquardt_loop
+    from idtool._fit._program import _COMPILE, run_lm
     from idtool._model._benchmodel import bench_model
 
     t0 = time.perf_counter()

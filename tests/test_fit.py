@@ -16,7 +16,7 @@ from scipy.integrate import solve_ivp
 import idtool
 from idtool._cli._main import main
 from idtool._data._blocks import padded_size, prepare_fit_data
-from idtool._fit._fit import lm_program, prediction_at, run_lm
+from idtool._fit._program import lm_program, prediction_at, run_lm
 from idtool._fit._reml import evaluate, fit_sds
 from idtool._fit._run import fit_dataset
 from idtool._model._benchmodel import bench_model

@@ -37,8 +37,9 @@ import dataclasses
 
 import numpy as np
 
-from idtool._fit._fit import fit_model, run_lm
+from idtool._fit._fit import fit_model
 from idtool._fit._intervals import Profile, profile_interval
+from idtool._fit._program import run_lm
 from idtool._fit._result import FitResult
 from idtool._model._benchmodel import BenchModel, bench_model
 from idtool._model._settings import ParameterSetting

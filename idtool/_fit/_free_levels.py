@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from idtool._fit._fit import run_lm
+from idtool._fit._program import run_lm
 from idtool._model._benchmodel import BenchModel
 
 __all__ = ["MIN_AT_LEVEL_S", "FreeLevels", "free_levels", "model_log_levels"]

@@ -17,7 +17,7 @@ import dataclasses
 
 import numpy as np
 
-from idtool._fit._fit import run_lm
+from idtool._fit._program import run_lm
 from idtool._fit._result import Z95, Z_AT_BOUND, FitResult
 
 __all__ = [

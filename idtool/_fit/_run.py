@@ -34,9 +34,10 @@ from idtool._fit._detuning import (
     detuning_profile,
     detuning_sentence,
 )
-from idtool._fit._fit import fit_model, lm_arguments, lm_program
+from idtool._fit._fit import fit_model
 from idtool._fit._intervals import Profile, check_intervals, profile_parameter
 from idtool._fit._prefetch import CompileAhead
+from idtool._fit._program import lm_arguments, lm_program
 from idtool._fit._result import FitResult
 from idtool._fit._variability import compile_variability, with_variability
 from idtool._model._actuator import ACTUATORS

@@ -34,8 +34,8 @@ import numpy as np
 from idtool._data._blocks import prepare_fit_data
 from idtool._data._dataset import Dataset
 from idtool._errors import IdtoolError
-from idtool._fit._fit import run_lm
 from idtool._fit._free_levels import free_levels
+from idtool._fit._program import run_lm
 from idtool._model._benchmodel import BenchModel, bench_model
 from idtool._predict._predict import Draws, predict_friction_ratio
 

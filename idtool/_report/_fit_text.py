@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from idtool._fit._derived import derived_estimates
-from idtool._fit._fit import prediction_at
+from idtool._fit._program import prediction_at
 from idtool._fit._result import Estimate, FitResult
 from idtool._fit._run import FitRun
 from idtool._fit._store import law_state_file
