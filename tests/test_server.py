@@ -113,8 +113,10 @@ def test_ctrl_c_interrupts_the_command_in_the_server_and_a_busy_server_is_bypass
 ):
     before = _served(server)
     out = tmp_path / "fit"
+    # every coupling law, the sdof one too: tens of seconds, so the server is still
+    # busy when the second command arrives and when Ctrl-C comes
     client = subprocess.Popen(
-        [IDTOOL, "fit", str(EXAMPLE), "--out", str(out)],
+        [IDTOOL, "fit", str(EXAMPLE), "--coupling", "auto", "--out", str(out)],
         env=server,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
