@@ -3,7 +3,9 @@
 Each run is a fresh interpreter doing what ``idtool fit DATASET --out DIR`` does, with
 the persistent compilation cache of the command line, in phases:
 
-* ``import``: ``import idtool`` and the command line's parser;
+* ``import``: ``import idtool``, the command line's parser and the numerical core
+  (JAX, equinox, optimistix, the fit's modules), which the fitting commands import
+  first and exempt from the garbage collector (``idtool._cli._args.load_numerics``);
 * ``load``: reading and checking the dataset;
 * ``fit``: ``idtool.fit`` (multi-start, polish, AR(1) rounds, interval checks), with
   the JAX tracing, lowering to StableHLO and XLA compilation (or cache loading) inside
@@ -56,9 +58,12 @@ def on_duration(event, secs, **_):
 
 jax.monitoring.register_event_duration_secs_listener(on_duration)
 from idtool._cli._main import _enable_compilation_cache, build_parser
+from idtool._cli import _args
 _enable_compilation_cache()
 build_parser()
 import idtool
+_args.freeze_on_load = True  # as the console script: the fit's modules, imports frozen
+_args.load_numerics()
 def mark(name):
     global t0
     now = time.perf_counter(); phases[name] = now - t0; t0 = now

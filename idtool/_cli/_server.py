@@ -65,6 +65,7 @@ class _Server:
         self.busy = threading.Lock()  # held from accepting a command to its exit status
         self.started = time.time()
         self.served = 0
+        self.sent_back = 0  # commands that arrived busy and ran in their own process
         self.running: socket.socket | None = None  # the connection of the running command
         self.state = threading.Lock()  # guards `running` against a late interrupt
 
@@ -75,6 +76,7 @@ class _Server:
             "socket": str(self.path),
             "started": self.started,
             "served": self.served,
+            "sent_back": self.sent_back,
             "busy": self.busy.locked(),
             "idle_minutes": self.idle_s / 60.0,
         }
@@ -113,6 +115,7 @@ class _Server:
                     _client.send(conn, self.status() | {"op": "stopping"})
                     self.jobs.put(_STOP)
                 else:
+                    self.sent_back += 1
                     _client.send(conn, {"op": "busy"})
 
     def watch(self, conn: socket.socket) -> None:
@@ -353,7 +356,8 @@ def _status(args: argparse.Namespace) -> int:
     for s in found:
         which = "this installation" if s["current"] else "another installation (or sources)"
         print(
-            f"pid {s['pid']}: {which}; {s['served']} commands served, "
+            f"pid {s['pid']}: {which}; {s['served']} commands served "
+            f"({s['sent_back']} sent back busy), "
             f"{'busy' if s['busy'] else 'idle'}, up {time.time() - s['started']:.0f} s; "
             f"{s['socket']}"
         )
