@@ -30,6 +30,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from idtool._cli._main import compilation_cache_settings
+
 __all__ = [
     "Lines",
     "ServerGone",
@@ -46,7 +48,7 @@ __all__ = [
 # (not MPLBACKEND: the commands draw on bare Figures, written as PNG whatever it says)
 _STARTUP_ENV = ("JAX_", "XLA_", "TF_CPP_", "IDTOOL_CACHE_DIR", "OMP_")
 # set by every command from IDTOOL_CACHE_DIR (idtool._cli._main._enable_compilation_cache)
-_SET_BY_IDTOOL = ("JAX_COMPILATION_CACHE", "JAX_PERSISTENT_CACHE")
+_SET_BY_IDTOOL = tuple(name.upper() for name in compilation_cache_settings(""))
 
 
 class ServerGone(RuntimeError):
@@ -81,9 +83,9 @@ def fingerprint() -> str:
     return h.hexdigest()[:20]
 
 
-def socket_path(print_: str | None = None) -> Path:
-    """The socket of this installation's server (``print_``: a fingerprint given)."""
-    return server_dir() / f"{print_ or fingerprint()}.sock"
+def socket_path() -> Path:
+    """The socket of this installation's server."""
+    return server_dir() / f"{fingerprint()}.sock"
 
 
 def _connect(path: Path) -> socket.socket | None:

@@ -49,10 +49,10 @@ def _warm_imports() -> None:
     import matplotlib
 
     matplotlib.use("Agg")  # the server has no display; idtool only writes files
-    import idtool._entry  # the fit, its models and JAX
-    import idtool._workflow  # noqa: F401  (saving, the figures)
+    from idtool._cli._args import load_numerics
     from idtool._cli._main import build_parser
 
+    load_numerics()  # the fit, its models and JAX (no freeze here: _collect does it)
     build_parser()
 
 
