@@ -29,6 +29,7 @@ from idtool._fit._run import FitRun
 from idtool._fit._store import StoredFit, law_state_file, save_fit_state
 from idtool._model._benchmodel import BenchModel
 from idtool._posterior._posterior import Posterior
+from idtool._posterior._runner import MAX_MINUTES, MAX_STEPS
 from idtool._posterior._sample import sample_posterior
 from idtool._posterior._store import POSTERIOR_FILE, load_posterior
 from idtool._predict._mixture import average_over_laws, chosen_law_weight
@@ -171,7 +172,7 @@ class Fit:
     def sample(
         self,
         walkers: int = 32,
-        steps: int = 3000,
+        steps: int | None = None,
         seed: int = 0,
         *,
         noise: str | None = None,
@@ -180,12 +181,16 @@ class Fit:
         chain_path: str | os.PathLike | None = None,
         resume: bool = False,
         checkpoint_s: float = 20.0,
+        max_steps: int = MAX_STEPS,
+        max_minutes: float = MAX_MINUTES,
     ) -> Posterior:
         """Sample the posterior of the shared and noise parameters with emcee (the
         per-trace nuisances integrated out); kept on the fit, so :meth:`predict` uses it
-        from then on. ``chain_path`` checkpoints the chain (``chain.h5``) every
-        ``checkpoint_s`` seconds; ``resume`` continues it. The same seed gives the same
-        chain."""
+        from then on. Without ``steps`` it samples until the chain has converged (the
+        rule in ``Posterior.diagnostics``), bounded by ``max_steps`` and ``max_minutes``;
+        ``steps`` runs a fixed length instead. ``chain_path`` checkpoints the chain
+        (``chain.h5``) every ``checkpoint_s`` seconds; ``resume`` continues it. The same
+        seed gives the same chain."""
         self.posterior = sample_posterior(
             self,
             walkers=walkers,
@@ -197,6 +202,8 @@ class Fit:
             resume=resume,
             progress=progress,
             checkpoint_s=checkpoint_s,
+            max_steps=max_steps,
+            max_minutes=max_minutes,
         )
         return self.posterior
 

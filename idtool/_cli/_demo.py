@@ -23,10 +23,11 @@ def _run(args: argparse.Namespace) -> int:
     refuse_existing(out, args.force)
     data = str(example_dataset_path())
     seed = str(args.seed)
+    steps_arg = [] if args.steps is None else ["--steps", str(args.steps)]
     steps = [
         ["validate", data],
         ["fit", data, "--out", str(out), "--seed", seed, "--force"],
-        ["sample", str(out), "--steps", str(args.steps), "--seed", seed, "--no-progress"],
+        ["sample", str(out), "--seed", seed, "--no-progress", *steps_arg],
         ["predict", str(out), "--load", "270,450,670", "--amplitude", "0.5,0.7"],
         ["predict", str(out), "--load", "450,670", "--target-reduction", "50"],
         ["report", str(out)],
@@ -52,12 +53,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="The whole idtool path on the shipped example dataset.",
     )
     p.add_argument("--out", default="fits/demo", help="output folder (default fits/demo)")
-    # 2000 steps: 36-60 autocorrelation times of the parameters on the example (tau 32-53
-    # steps), under the 50 the convergence check asks of all; the discrepancy sd, at its
-    # zero bound there, mixes slowest and its time grows with the chain (74 steps at
-    # 2000, 111 at 5000). The chain is reported NOT converged and the demo exits 3 after
-    # writing everything (make demo accepts that status).
-    p.add_argument("--steps", type=int, default=2000, help="sampling steps (default 2000)")
+    p.add_argument(
+        "--steps",
+        type=int,
+        default=None,
+        help="a fixed number of sampling steps (default: sample until converged)",
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--force", action="store_true", help="replace an existing --out")
     p.set_defaults(func=_run)

@@ -44,6 +44,8 @@ def _run(args: argparse.Namespace) -> int:
             resume=args.resume,
             progress=not (args.no_progress or args.quiet),
             checkpoint_s=args.checkpoint_s,
+            max_steps=args.max_steps,
+            max_minutes=args.max_minutes,
         )
     except KeyboardInterrupt:
         saved = f"the steps done so far are in {chain}" if chain.exists() else "nothing saved"
@@ -62,10 +64,15 @@ def _run(args: argparse.Namespace) -> int:
     diagnostics = fit.posterior.diagnostics
     if not diagnostics.converged:
         # on stderr, so --quiet and --json keep it: the draws are not to be trusted yet
+        how = (
+            f"--resume --steps {diagnostics.steps + diagnostics.steps_needed}"
+            if args.steps is not None
+            else "--resume (raise --max-minutes or --max-steps if it stopped at one)"
+        )
         print(
             f"idtool sample: the chain did NOT converge (about {diagnostics.steps_needed} "
-            "more steps needed): its outputs are written, but continue it with --resume "
-            "--steps N before using them",
+            f"more steps needed): its outputs are written, but continue it with {how} "
+            "before using them",
             file=sys.stderr,
         )
         return EXIT_NOT_CONVERGED
@@ -84,6 +91,7 @@ def _positive_int(text: str) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     from idtool._cli._args import registry_names
+    from idtool._posterior._runner import MAX_MINUTES, MAX_STEPS
 
     p = sub.add_parser(
         "sample",
@@ -95,10 +103,30 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("fit", help="fit folder written by 'idtool fit', e.g. fits/NAME")
     p.add_argument("--walkers", type=_positive_int, help="walkers (default 32)")
     p.add_argument(
-        "--steps", type=_positive_int, default=3000, help="total chain length (default 3000)"
+        "--steps",
+        type=_positive_int,
+        default=None,
+        help="a fixed total chain length (default: sample until converged: kept chain >= 50 "
+        "tau with tau settled, split R-hat <= 1.01 and bulk ESS >= 400 for every parameter)",
+    )
+    p.add_argument(
+        "--max-steps",
+        type=_positive_int,
+        default=MAX_STEPS,
+        help=f"without --steps: stop after this many steps in all (default {MAX_STEPS})",
+    )
+    p.add_argument(
+        "--max-minutes",
+        type=float,
+        default=MAX_MINUTES,
+        help=f"without --steps: stop after this many minutes of sampling (default {MAX_MINUTES:g})",
     )
     p.add_argument("--seed", type=int, help="random seed (default 0)")
-    p.add_argument("--resume", action="store_true", help="continue chain.h5 up to --steps in total")
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue chain.h5 (until converged, or up to --steps in total)",
+    )
     p.add_argument("--force", action="store_true", help="discard an existing chain.h5")
     p.add_argument(
         "--noise",

@@ -2,8 +2,11 @@
 
 * The log-posterior of :mod:`idtool._posterior._likelihood`, batched over walkers (the contact
   model vmapped, the bench model with walkers as its fastest axis), is compiled once and
-  handed to ``emcee.EnsembleSampler(vectorize=True)``; emcee evaluates half the
-  ensemble at a time, so every call has the same shape (one compilation).
+  handed to ``emcee.EnsembleSampler(vectorize=True)``; emcee evaluates half the ensemble
+  (DE move) or a quarter (snooker move) at a time, in batches of a quarter, so every call
+  has the same shape (one compilation).
+* Without a fixed number of steps it samples until the chain has converged
+  (:mod:`idtool._posterior._runner`).
 * Walkers start from a multivariate normal around the fit's optimum with the fit's
   covariance (the shared block of ``cov_z``; the noise parameters from their asymptotic
   errors); the log-posterior must be finite at the optimum and at every start.
@@ -34,14 +37,7 @@ from idtool._errors import IdtoolError
 from idtool._fit._variability import SD_PARAMS
 from idtool._model._benchmodel import BenchModel
 from idtool._model._noise import NOISE_MODELS
-from idtool._posterior._chainfile import (
-    append_segment,
-    last_state,
-    read_chain,
-    read_linearisation,
-    read_settings,
-)
-from idtool._posterior._diagnostics import diagnose
+from idtool._posterior._chainfile import last_state, read_linearisation, read_settings
 from idtool._posterior._levels import (
     SD_PRIOR,
     LevelsTarget,
@@ -62,6 +58,7 @@ from idtool._posterior._prior import (
     parse_priors,
     read_priors,
 )
+from idtool._posterior._runner import FIRST_CHECK, MAX_MINUTES, MAX_STEPS, ChainStore, run_chain
 from idtool._posterior._start import find_start, initial_walkers
 
 __all__ = ["CHAIN_FILE", "LogPosterior", "sample_posterior"]
@@ -181,7 +178,7 @@ def _resolve(fit, noise, priors, stored: dict | None):
 def sample_posterior(
     fit: FitLike,
     walkers: int | None = None,
-    steps: int = 3000,
+    steps: int | None = None,
     seed: int | None = None,
     noise: str | None = None,
     priors: str | os.PathLike | dict | None = None,
@@ -189,13 +186,19 @@ def sample_posterior(
     resume: bool = False,
     progress: bool = False,
     checkpoint_s: float = 20.0,
+    max_steps: int = MAX_STEPS,
+    max_minutes: float = MAX_MINUTES,
 ) -> Posterior:
     """Sample the posterior of ``fit``'s shared parameters (module docstring).
 
     Args:
         fit: a :class:`~idtool._fit._result.FitResult` or a stored fit (``idtool._fit._store``).
-        walkers, steps: ensemble size (default 32) and total chain length (a resumed
-            chain is continued up to ``steps``).
+        walkers: ensemble size (default 32).
+        steps: total chain length (a resumed chain is continued up to ``steps``); ``None``
+            (the default) samples until the chain has converged
+            (:data:`idtool._posterior._diagnostics.RULE`; :mod:`idtool._posterior._runner`),
+            at most ``max_steps`` steps in total and ``max_minutes`` of this run's
+            sampling, whichever comes first.
         seed: seeds the walker starts and emcee's moves (default 0; on resume the
             random state comes from the chain file).
         noise: a registered noise model (``NOISE_MODELS``; default: the fit's).
@@ -229,8 +232,12 @@ def sample_posterior(
         raise IdtoolError(
             f"{walkers} walkers for {ndim} parameters: give an even number above {2 * ndim}"
         )
-    if steps < 10:
-        raise IdtoolError(f"{steps} steps: give at least 10")
+    if steps is not None and steps < 10:
+        raise IdtoolError(f"steps {steps}: give at least 10")
+    if max_steps < FIRST_CHECK:
+        raise IdtoolError(f"max_steps {max_steps}: give at least {FIRST_CHECK}")
+    if not max_minutes > 0:
+        raise IdtoolError(f"max_minutes {max_minutes:g}: give a positive number")
     started = time.perf_counter()
     warnings: tuple[str, ...] = ()
     if done == 0 and noise == LEVELS:
@@ -239,7 +246,7 @@ def sample_posterior(
         k = fit.model.n_physical
         theta, cov = levels_start(fit.z[:k], fit.cov_z[:k, :k], sds, levels_target)
         z_lin, mode_s = np.asarray(fit.z), 0.0
-        fn = LogPosterior(levels_target, walkers // 2)
+        fn = LogPosterior(levels_target, _batch(walkers))
         p0 = initial_walkers(theta, cov, fn, walkers, np.random.default_rng(seed))
         initial: Any = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
     elif done == 0:
@@ -247,62 +254,50 @@ def sample_posterior(
         start = find_start(fit, rebuild(np.asarray(fit.z)), rebuild)
         mode_s = time.perf_counter() - started
         z_lin, warnings = start.z_lin, start.warnings
-        fn = LogPosterior(start.target, walkers // 2)
+        fn = LogPosterior(start.target, _batch(walkers))
         p0 = initial_walkers(start.theta, start.cov, fn, walkers, np.random.default_rng(seed))
         initial = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
     else:
         assert chain_file is not None
         z_lin = read_linearisation(chain_file)
         if noise == LEVELS:
-            fn = LogPosterior(build_levels_target(fit.model, fit.levels[0], table), walkers // 2)
+            fn = LogPosterior(build_levels_target(fit.model, fit.levels[0], table), _batch(walkers))
         else:
-            fn = LogPosterior(build_target(fit.model, z_lin, noise, table), walkers // 2)
+            fn = LogPosterior(build_target(fit.model, z_lin, noise, table), _batch(walkers))
         initial = last_state(chain_file)
         mode_s = 0.0
     settings = _settings(fit, params, table, noise, walkers, seed) | {"warnings": list(warnings)}
-    bar = _progress(progress, steps, done)
-    sample_s = 0.0
+    store = ChainStore(chain_file, settings, np.asarray(z_lin))
+    bar = _progress(progress, steps if steps is not None else max(done, FIRST_CHECK), done)
     start_done = done
-    segments = []
     try:
-        while done < steps:
-            backend = emcee.backends.Backend()
-            sampler = emcee.EnsembleSampler(
+        diag, sample_s = run_chain(
+            lambda backend: emcee.EnsembleSampler(
                 walkers, ndim, fn, vectorize=True, backend=backend, moves=_moves()
-            )
-            t0 = time.perf_counter()
-            it = sampler.sample(initial, iterations=steps - done, skip_initial_state_check=True)
-            for _ in it:
-                done += 1
-                bar.update(1)
-                if chain_file is not None and time.perf_counter() - t0 > checkpoint_s:
-                    break
-            sample_s += time.perf_counter() - t0
-            initial = backend.get_last_sample()
-            if chain_file is None:
-                segments.append(backend)
-            else:
-                new = done - backend.iteration == 0
-                append_segment(chain_file, backend, initial.random_state, settings, new, z_lin)
+            ),
+            initial,
+            store,
+            done,
+            tuple(p.name for p in params),
+            steps,
+            max_steps,
+            max_minutes,
+            checkpoint_s,
+            bar,
+        )
     finally:
         bar.close()
-    if chain_file is not None:
-        chain, lp, acc = read_chain(chain_file)
-    else:
-        chain = np.concatenate([b.get_chain() for b in segments])
-        lp = np.concatenate([b.get_log_prob() for b in segments])
-        acc = sum(b.accepted for b in segments) / done
+    chain, lp, acc = store.read()
     values = np.stack(
         [np.asarray(p.value(jnp.asarray(chain[:, :, i]))) for i, p in enumerate(params)], axis=-1
     )
-    diag = diagnose(chain, acc, tuple(p.name for p in params))
     if stored is not None:
         warnings = tuple(stored.get("warnings", ()))
     timing = {
         "mode_search_s": mode_s,
         "compile_s": float(fn.compile_s or 0.0),
         "sampling_s": sample_s,
-        "steps_this_run": float(done - start_done),
+        "steps_this_run": float(diag.steps - start_done),
         "total_s": time.perf_counter() - started,
         "log_posterior_evaluations": float(fn.evaluations),
     }
@@ -327,19 +322,46 @@ def sample_posterior(
     )
 
 
+def _batch(walkers: int) -> int:
+    """Rows of the compiled log-posterior: a quarter of the ensemble (rounded up), the
+    snooker move's subsets; the DE move's halves run as two batches (the cost is linear in
+    the rows, so a padded batch would be time lost)."""
+    return -(-walkers // 4)
+
+
 def _moves():
-    """emcee's differential-evolution move (ter Braak 2006). On this posterior
-    (near-Gaussian, strongly correlated) its autocorrelation times are about a third of
-    the default stretch move's (27 against 81 steps on the example,
-    benchmarks/bench_sample.py); the snooker variant did not help and splits the
-    ensemble in four (smaller, less efficient batches)."""
+    """emcee's differential-evolution move (ter Braak 2006) and its snooker variant (ter
+    Braak & Vrugt 2008), half and half, chosen by measured autocorrelation times on levels
+    posteriors (32 walkers x 4000 steps, seed 0): the example and the departure benches
+    "scatter", "coupling" and "all" (seed 1). Largest tau per bench:
+
+    ============  =======  ==========  ==========  ==========
+    bench         DE       DE + 35% S  DE + 50% S  DE + 65% S
+    ============  =======  ==========  ==========  ==========
+    example       101      34          32          36
+    coupling      254      37          38          38
+    all           192      51          44          38
+    scatter       -        37          33          37
+    ============  =======  ==========  ==========  ==========
+
+    DE alone stalls on the curved ridge of the saturating coupling's gain and load scale
+    (acceptance 0.09-0.16) and on the skewed log-sd of the discrepancy; the snooker's
+    jumps along the line through another walker follow both. With the log-posterior
+    compiled for a quarter of the ensemble (:func:`_batch`) a snooker step costs what a
+    DE step costs. Folding the sds onto a signed linear scale (sd = |s|) was measured too:
+    it helped the sds but slowed the physical parameters (largest tau 72)."""
     import emcee
 
-    return [(emcee.moves.DEMove(), 1.0)]
+    return [(emcee.moves.DEMove(), 0.5), (emcee.moves.DESnookerMove(), 0.5)]
 
 
 class _NoBar:
+    total: int = 0
+
     def update(self, n: int) -> None:
+        pass
+
+    def set_postfix_str(self, text: str) -> None:
         pass
 
     def close(self) -> None:

@@ -21,6 +21,7 @@ from idtool._atomic import atomic_output_dir, write_text_atomic
 from idtool._errors import IdtoolError
 from idtool._fit._store import load_stored_fit
 from idtool._fit._variability import MISFIT
+from idtool._posterior._diagnostics import STOP_REASONS
 from idtool._posterior._store import POSTERIOR_FILE
 from idtool._predict._mixture import prediction_draws
 from idtool._report._answer import answer
@@ -101,11 +102,13 @@ def _banners(doc: dict, meta: dict | None, extrapolation: Sequence[str] = ()) ->
     out = []
     if meta is not None and not meta["diagnostics"].get("converged", True):
         diag = meta["diagnostics"]
+        stop = STOP_REASONS.get(diag.get("stopped_by", ""), "")
         out.append(
-            f"The posterior chain did NOT converge ({diag.get('steps')} steps; about "
-            f"{diag.get('steps_needed')} more needed): the posterior's columns, bands and "
-            "plots below are not to be trusted yet. Continue it with idtool sample FIT "
-            "--resume --steps N, then report again."
+            f"The posterior chain did NOT converge ({diag.get('steps')} steps"
+            + (f", stopped: {stop}" if stop else "")
+            + f"; about {diag.get('steps_needed')} more needed): the posterior's columns, "
+            "bands and plots below are not to be trusted yet. Continue it with idtool sample "
+            "FIT --resume, then report again."
         )
     out += [f"Model misfit: {w}" for w in doc["warnings"] if w.startswith(MISFIT)]
     out += [f"Extrapolated answer: {n.removesuffix(': extrapolation')}" for n in extrapolation]

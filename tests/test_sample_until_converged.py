@@ -1,0 +1,158 @@
+"""Sampling until the chain has converged (issue 26): the stopping rule, its bounds, the
+default run on a fit, and a resumed run equal to an uninterrupted one.
+
+The rule's mechanics are checked on targets whose answers are known (a correlated
+Gaussian: mean and covariance; a banana that no short run can converge on), the default
+path on a simulated bench's default fit (levels model)."""
+
+import json
+import warnings
+
+import emcee
+import numpy as np
+import pytest
+
+import idtool
+from idtool._cli._main import main
+from idtool._data._example import example_dataset_path
+from idtool._posterior._chainfile import read_chain
+from idtool._posterior._diagnostics import RULE, diagnose
+from idtool._posterior._runner import FIRST_CHECK, ChainStore, run_chain
+from idtool._posterior._sample import _moves, sample_posterior
+
+NAMES = ("a", "b", "c", "d")
+# a correlated 4-D Gaussian (correlations up to 0.95, sds over two decades)
+SD = np.array([1.0, 0.1, 10.0, 1.0])
+CORR = np.array(
+    [
+        [1.0, 0.95, 0.3, 0.0],
+        [0.95, 1.0, 0.2, 0.0],
+        [0.3, 0.2, 1.0, -0.5],
+        [0.0, 0.0, -0.5, 1.0],
+    ]
+)
+COV = CORR * np.outer(SD, SD)
+MEAN = np.array([1.0, -2.0, 30.0, 0.0])
+PREC = np.linalg.inv(COV)
+
+
+def gaussian(x):
+    d = np.atleast_2d(x) - MEAN
+    return -0.5 * np.einsum("ij,jk,ik->i", d, PREC, d)
+
+
+def banana(x):
+    """Rosenbrock's banana (a = 1, b = 100) in the first two coordinates: curved and
+    long, DE moves need thousands of steps on it."""
+    x = np.atleast_2d(x)
+    return -((1.0 - x[:, 0]) ** 2) - 100.0 * (x[:, 1] - x[:, 0] ** 2) ** 2 - 0.5 * x[:, 2] ** 2
+
+
+class Checks:
+    """A progress bar that records the step count at each failed check."""
+
+    def __init__(self):
+        self.n, self.total, self.failed = 0, 0, []
+
+    def update(self, n):
+        self.n += n
+
+    def set_postfix_str(self, text):
+        self.failed.append(self.n)
+
+
+def _run(log_prob, ndim, seed=0, **kw):
+    rng = np.random.default_rng(seed)
+    p0 = MEAN[:ndim] + 0.1 * SD[:ndim] * rng.standard_normal((32, ndim))
+    state = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
+    store = ChainStore(None, {}, np.zeros(0))
+    bar = Checks()
+    opts = {"steps": None, "max_steps": 100_000, "max_minutes": 10.0} | kw
+    diag, _ = run_chain(
+        lambda b: emcee.EnsembleSampler(32, ndim, log_prob, vectorize=True, backend=b, moves=_moves()),
+        state,
+        store,
+        0,
+        NAMES[:ndim],
+        opts["steps"],
+        opts["max_steps"],
+        opts["max_minutes"],
+        20.0,
+        bar,
+    )
+    chain, _, acc = store.read()
+    return diag, chain, acc, bar
+
+
+def test_a_run_to_convergence_stops_at_the_first_check_that_meets_the_rule():
+    diag, chain, acc, bar = _run(gaussian, 4)
+    assert diag.converged and diag.stopped_by == "converged"
+    assert diag.steps == chain.shape[0] and bar.failed  # it was checked before, and failed
+    # the rule, re-applied to the chain at the last failed check, fails there too
+    assert not diagnose(chain[: bar.failed[-1]], acc, NAMES).converged
+    # ... and every criterion holds at the end
+    assert diag.kept >= 50 * diag.tau.max() and np.all(diag.rhat <= 1.01)
+    assert np.all(diag.ess_bulk >= 400) and diag.tau_change[np.argmax(diag.tau)] < 0.02
+    # not far past what the chain needed: 50 tau + burn-in, plus one check interval (10%)
+    assert diag.steps <= 1.1 * (52 * diag.tau.max()) + 100
+    # the answer: mean within 4 Monte Carlo standard errors, sds within 10%
+    kept = chain[diag.burn :].reshape(-1, 4)
+    se = SD / np.sqrt(diag.ess_bulk)
+    assert np.all(np.abs(kept.mean(axis=0) - MEAN) < 4 * se)
+    np.testing.assert_allclose(kept.std(axis=0), SD, rtol=0.1)
+
+
+def test_the_bounds_stop_a_run_that_cannot_converge_and_say_so():
+    diag, chain, _, _ = _run(banana, 3, max_steps=FIRST_CHECK + 200)
+    assert not diag.converged and diag.stopped_by == "max_steps"
+    assert chain.shape[0] == FIRST_CHECK + 200 and diag.steps_needed > 0
+    diag, chain, _, _ = _run(banana, 3, max_minutes=0.2 / 60)
+    assert not diag.converged and diag.stopped_by == "max_minutes"
+    assert 0 < chain.shape[0] < 5000 and diag.steps_needed > 0
+    # a fixed length is that length, converged or not, whatever the bounds
+    diag, chain, _, _ = _run(gaussian, 4, steps=150, max_minutes=1e-9)
+    assert chain.shape[0] == 150 and diag.stopped_by == "steps"
+
+
+@pytest.fixture(scope="module")
+def default_fit(tmp_path_factory):
+    """The shipped example's default fit (three loads, two amplitudes: a design whose
+    posterior is proper; on two loads at one amplitude the power limit's load scale is
+    bounded by its prior only and no run converges within the bounds)."""
+    dataset = idtool.load_dataset(example_dataset_path())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the fit's own warnings are not checked here
+        fit = idtool.fit(dataset, seed=0)
+    folder = tmp_path_factory.mktemp("fits") / "small"
+    fit.save(folder, plots=False)
+    return folder
+
+
+def test_a_default_sample_of_a_default_fit_converges(default_fit, tmp_path):
+    fit = idtool.load_fit(default_fit)
+    straight = fit.sample(seed=2)  # no steps: until converged
+    d = straight.diagnostics
+    assert d.converged and d.stopped_by == "converged" and d.steps >= FIRST_CHECK
+    # stopped by max_steps at the first check, then resumed: the same chain, bit for bit
+    chain = tmp_path / "chain.h5"
+    first = sample_posterior(fit, seed=2, chain_path=chain, max_steps=FIRST_CHECK)
+    assert first.diagnostics.stopped_by == "max_steps" and not first.diagnostics.converged
+    resumed = sample_posterior(fit, chain_path=chain, resume=True)
+    assert resumed.diagnostics.stopped_by == "converged"
+    np.testing.assert_array_equal(resumed.chain, straight.chain)
+    assert read_chain(chain)[0].shape[0] == d.steps
+
+
+def test_the_command_line_samples_until_converged_and_records_the_rule(default_fit, tmp_path):
+    argv = ["sample", str(default_fit), "--seed", "2", "--no-progress", "-q", "--force"]
+    assert main(argv) == 0
+    doc = json.loads((default_fit / "sample.json").read_text())["diagnostics"]
+    assert doc["converged"] and doc["stopped_by"] == "converged" and doc["rule"] == RULE
+    assert all(p["ess_bulk"] >= 400 and p["rhat"] <= 1.01 for p in doc["parameters"].values())
+    text = (default_fit / "report_sample.txt").read_text()
+    assert "stopped by: the convergence rule was met" in text
+    # the bound, on the command line: exit 3 (written, not converged), and says which bound
+    argv = [*argv, "--max-steps", str(FIRST_CHECK)]
+    assert main(argv) == 3
+    doc = json.loads((default_fit / "sample.json").read_text())["diagnostics"]
+    assert not doc["converged"] and doc["stopped_by"] == "max_steps"
