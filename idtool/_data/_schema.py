@@ -39,12 +39,13 @@ _ALL = (DATASET_SCHEMA, TRACE_TABLE_SCHEMA, SIMULATOR_PARAMS_SCHEMA)
 
 
 def _schema_text(name: str) -> str:
-    """Text of one schema file, from the installed package or, failing that, the source tree."""
-    try:
-        return importlib.resources.files("idtool.datasets_schema").joinpath(name).read_text("utf-8")
-    except ModuleNotFoundError:
-        # A checkout whose editable install predates the package-dir mapping.
-        return (Path(__file__).resolve().parents[2] / "datasets_schema" / name).read_text("utf-8")
+    """Text of one schema file: the source tree's beside this package when there is one
+    (a git worktree's own schemas, not those of the checkout the editable install maps
+    ``idtool.datasets_schema`` to), else the installed package's."""
+    source = Path(__file__).resolve().parents[2] / "datasets_schema" / name
+    if source.is_file():
+        return source.read_text("utf-8")
+    return importlib.resources.files("idtool.datasets_schema").joinpath(name).read_text("utf-8")
 
 
 @functools.cache

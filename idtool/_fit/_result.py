@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -61,6 +61,9 @@ class FitResult:
     variability: Variability | None = None
     # what the data let the fit measure, for the report (not doubts: those are warnings)
     notes: list[str] = dataclasses.field(default_factory=list)
+    # the levels' trends within their plateaus by kind ("ON", "OFF"), when diagnosed
+    # (:mod:`idtool._fit._plateau_drift`)
+    plateau_drift: dict[str, Any] | None = None
 
     @property
     def sd_grids(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:

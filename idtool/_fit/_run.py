@@ -36,6 +36,7 @@ from idtool._fit._detuning import (
 )
 from idtool._fit._fit import fit_model
 from idtool._fit._intervals import Profile, check_intervals, profile_parameter
+from idtool._fit._plateau_drift import with_plateau_drift
 from idtool._fit._prefetch import CompileAhead
 from idtool._fit._program import lm_arguments, lm_program
 from idtool._fit._result import FitResult
@@ -262,6 +263,8 @@ def fit_dataset(
         if variability:  # pull-to-pull scatter and model discrepancy (issue 10)
             say("estimating the pull-to-pull scatter and the model discrepancy")
             best = candidates[best_key] = with_variability(best)
+        # levels drifting within their plateaus (a fading horn, a creeping level)
+        best = candidates[best_key] = with_plateau_drift(best)
         weights = coupling_weights(candidates)
         chosen = weights[best.model.coupling.name]
         alternates = {}

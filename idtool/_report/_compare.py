@@ -24,6 +24,7 @@ import numpy as np
 from idtool._atomic import atomic_output_dir
 from idtool._entry import load_fit
 from idtool._errors import IdtoolError
+from idtool._fit._plateau_drift import DRIFT
 from idtool._fit._variability import MISFIT
 from idtool._posterior._store import POSTERIOR_FILE
 from idtool._predict._amplitude import AmplitudeFor
@@ -363,6 +364,7 @@ def _compare_one(
     # range); a needed amplitude beyond it is marked in its own cell, and warned below.
     banners = [n.removesuffix(": extrapolation") + ": extrapolated" for n in notes]
     banners += [f"{label}: model misfit: {w}" for w in fit.warnings if w.startswith(MISFIT)]
+    banners += [f"{label}: level drift: {w}" for w in fit.warnings if w.startswith(DRIFT)]
     warnings = []
     if draws.source != "posterior":
         warnings.append(f"{label}: {draws.note}")

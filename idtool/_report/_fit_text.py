@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from idtool._fit._derived import derived_estimates
+from idtool._fit._plateau_drift import MIN_RELATIVE_CHANGE, P_ALARM
 from idtool._fit._program import prediction_at
 from idtool._fit._result import Estimate, FitResult
 from idtool._fit._run import FitRun
@@ -120,6 +121,8 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
             "sigma_n": r.sigma_n,
         },
         "variability": _variability_json(r),
+        # the levels' trends within their plateaus (_fit/_plateau_drift.py)
+        "plateau_drift": _plateau_drift_json(r),
         "correlation": {"names": shared, "matrix": r.correlation[np.ix_(idx, idx)].tolist()},
         "model_comparison": [
             {"model": key, "aic": c.aic, "bic": c.bic, "loglik": c.loglik, "n_params": c.n_params}
@@ -157,6 +160,20 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
         "command": prov["command"],
         "versions": prov["versions"],
         "created_utc": prov["created_utc"],
+    }
+
+
+def _plateau_drift_json(r: FitResult) -> dict:
+    """Per kind of plateau (ON, OFF): how many were tested and significant, the median
+    relative change and duration, the pooled statistic and p-value (``_fit/_plateau_drift.py``)."""
+    if r.plateau_drift is None:
+        return {"on": False}
+    return {
+        "on": True,
+        "test": "Stouffer's z of the plateaus' residual slopes, AR(1) standard errors",
+        "p_alarm": P_ALARM,
+        "min_relative_change": dict(MIN_RELATIVE_CHANGE),
+        **{kind: p.to_dict() for kind, p in r.plateau_drift.items()},
     }
 
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from idtool._atomic import atomic_output_dir, write_text_atomic
 from idtool._errors import IdtoolError
+from idtool._fit._plateau_drift import DRIFT
 from idtool._fit._store import load_stored_fit
 from idtool._fit._variability import MISFIT
 from idtool._posterior._diagnostics import STOP_REASONS
@@ -111,6 +112,7 @@ def _banners(doc: dict, meta: dict | None, extrapolation: Sequence[str] = ()) ->
             "FIT --resume, then report again."
         )
     out += [f"Model misfit: {w}" for w in doc["warnings"] if w.startswith(MISFIT)]
+    out += [f"Level drift: {w}" for w in doc["warnings"] if w.startswith(DRIFT)]
     out += [f"Extrapolated answer: {n.removesuffix(': extrapolation')}" for n in extrapolation]
     return "".join(f'<p class="banner">{html.escape(b)}</p>' for b in out)
 

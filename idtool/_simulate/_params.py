@@ -4,7 +4,8 @@ The dataclasses mirror the JSON file one to one, so ``BenchParams.from_dict(p.to
 is ``p`` and the schema's descriptions (with units) document every field.
 
 The optional fields describe departures of the bench from the fit's model (pull-to-pull
-scatter, a lagging actuator, offset drift, a coupling law the fit does not ship). Their
+scatter, a lagging actuator, offset drift, a coupling law the fit does not ship, a horn
+fading within its ON windows, a creeping friction level). Their
 defaults are "no departure" and reproduce the simulator's earlier output bit for bit;
 :meth:`BenchParams.to_dict` leaves out optional fields at their defaults, so a file
 without them reads and writes back unchanged.
@@ -30,6 +31,7 @@ __all__ = [
     "ContactParams",
     "CouplingParams",
     "ExperimentParams",
+    "FadingParams",
     "LoadCellParams",
     "OutputParams",
     "ScatterParams",
@@ -42,11 +44,14 @@ PARAMS_VERSION = "1"
 
 @dataclasses.dataclass(frozen=True)
 class ContactParams:
-    """The true contact: Dahl with coefficient mu [-] and stiffness Kt [N/m]."""
+    """The true contact: Dahl with coefficient mu [-] and stiffness Kt [N/m]; optionally
+    mu creeping by ``level_creep_per_s`` [1/s] of itself per second of sliding."""
 
     friction_law: str
     friction_coefficient: float
     contact_stiffness_n_m: float
+    # relative creep of mu with sliding time [1/s] (:mod:`idtool._simulate._plateau_drift`)
+    level_creep_per_s: float = 0.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -162,6 +167,17 @@ class ScatterParams:
 
 
 @dataclasses.dataclass(frozen=True)
+class FadingParams:
+    """A horn whose slip amplitude fades within each ON window (truth only):
+    ``a(t_on) = a0 (1 - fade_fraction (1 - exp(-t_on / fade_time_constant_s)))``, with
+    ``t_on`` [s] the time since the horn switched on (:mod:`idtool._simulate._plateau_drift`).
+    """
+
+    fade_fraction: float = 0.0
+    fade_time_constant_s: float = 1.0
+
+
+@dataclasses.dataclass(frozen=True)
 class ExperimentParams:
     """The matrix (loads [N] x amplitude fractions x ON durations [s] x repeats) and timing."""
 
@@ -198,6 +214,7 @@ class BenchParams:
     output: OutputParams
     description: str | None = None
     scatter: ScatterParams = ScatterParams()
+    horn_fading: FadingParams = FadingParams()
 
     @classmethod
     def from_dict(cls, document: Mapping[str, Any], file: str = "params") -> BenchParams:
@@ -229,6 +246,7 @@ class BenchParams:
                 friction_law=d["contact"]["friction_law"],
                 friction_coefficient=float(d["contact"]["friction_coefficient"]),
                 contact_stiffness_n_m=float(d["contact"]["contact_stiffness_n_m"]),
+                level_creep_per_s=float(d["contact"].get("level_creep_per_s", 0.0)),
             ),
             coupling=CouplingParams(
                 law=d["coupling"]["law"],
@@ -241,6 +259,7 @@ class BenchParams:
             output=OutputParams(**d["output"]),
             description=d.get("description"),
             scatter=ScatterParams(**_floats(d.get("scatter", {}))),
+            horn_fading=FadingParams(**_floats(d.get("horn_fading", {}))),
         )
 
     def to_dict(self) -> dict[str, Any]:

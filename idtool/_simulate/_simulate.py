@@ -11,12 +11,14 @@ time.
 
 Optional departures from the fit's model (:mod:`idtool._simulate._params`): pull-to-pull
 scatter of FR and mu, a rate-limited first-order-lag actuator (:mod:`idtool._simulate._lag`),
-a linear drift of the offset and a truth-only coupling law
-(:mod:`idtool._simulate._truth_coupling`). Their random draws come from one child stream of
-the trace's stream (``rng.spawn(1)``), which leaves the trace's own stream untouched: with
-the departures off the output is bit for bit what it was before they existed, and turning
-on scatter, drift or the truth-only coupling changes none of the noise (the lag actuator
-and another sample rate change the trace lengths, hence the noise).
+a linear drift of the offset, a truth-only coupling law
+(:mod:`idtool._simulate._truth_coupling`), a horn fading within its ON windows and a
+creeping friction level (:mod:`idtool._simulate._plateau_drift`). Their random draws
+come from one child stream of the trace's stream (``rng.spawn(1)``), which leaves the
+trace's own stream untouched: with the departures off the output is bit for bit what it
+was before they existed, and turning on scatter, drift, the truth-only coupling, the
+fading or the creep changes none of the noise (the lag actuator and another sample rate
+change the trace lengths, hence the noise).
 
 The truth (:class:`BenchTruth`, written as ``true_parameters.json``) holds per trace its
 FR, mu and OFF level as drawn, and per operating point the FR without scatter
@@ -43,6 +45,7 @@ from idtool._model._bench import TraceTiming, dahl_at_load, mean_force_n, on_con
 from idtool._simulate._lag import lag_actuator_force_n
 from idtool._simulate._noise import ar1_noise, mains_hum, quantise, white_noise
 from idtool._simulate._params import ActuatorParams, BenchParams
+from idtool._simulate._plateau_drift import on_force_end_n, with_plateau_drifts
 from idtool._simulate._truth import BenchTruth, OperatingPoint, OperatingPointTruth, TraceTruth
 
 __all__ = [
@@ -198,6 +201,7 @@ def noise_free_force_n(params: BenchParams, trace: TraceTruth, time_s: np.ndarra
                 act.corner_n,
             )
         )[:n]
+    force = with_plateau_drifts(params, trace, time_s, force)
     if trace.offset_drift_n_s != 0.0:  # skipped at 0 so the default output is unchanged
         force = force + trace.offset_drift_n_s * time_s
     return force
@@ -285,8 +289,13 @@ def _simulate_trace(
         operating_point_friction_ratio=op.friction_ratio,
         offset_drift_n_s=drift,
         startup_end_s=startup_end,
+        level_creep_per_s=params.contact.level_creep_per_s,
     )
-    truth = dataclasses.replace(truth, reaches_on_level=_reaches_on_level(params, truth))
+    truth = dataclasses.replace(
+        truth,
+        reaches_on_level=_reaches_on_level(params, truth),
+        on_force_end_n=on_force_end_n(params, truth),
+    )
     noisy = (
         noise_free_force_n(params, truth, time_s)
         + white_noise(rng, n, cell.white_noise_std_n)

@@ -45,6 +45,12 @@ class TraceTruth:
         offset_drift_n_s: this trace's offset drift rate [N/s]: the offset at time t is
             ``load_cell_offset_n + offset_drift_n_s * t``.
         startup_end_s: end of the start-up rise [s]; the steady OFF sliding follows.
+        on_force_end_n: the ON level [N] at the horn's switch-off, without the offset
+            (None without ON): above ``on_force_n`` (the level at switch-on) when the horn
+            fades (:mod:`idtool._simulate._plateau_drift`), else equal to it.
+        level_creep_per_s: relative creep of mu with sliding time [1/s]: the levels are
+            ``off_force_n`` and ``on_force_n`` times ``1 + level_creep_per_s * (t -
+            startup_s)``.
     """
 
     id: str
@@ -67,6 +73,8 @@ class TraceTruth:
     operating_point_friction_ratio: float
     offset_drift_n_s: float
     startup_end_s: float
+    on_force_end_n: float | None = None
+    level_creep_per_s: float = 0.0
 
 
 @dataclasses.dataclass(frozen=True)
