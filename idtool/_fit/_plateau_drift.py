@@ -239,7 +239,13 @@ def plateau_noise(plateaus: list[tuple[np.ndarray, np.ndarray]]) -> tuple[float,
         n += e.size - 2  # two parameters per line
     if den <= 0.0 or n <= 0:
         return 0.0, 0.0
-    phi = min(max(num / den, 0.0), 0.95)
+    # Removing each line biases the lag-1 estimate low, by about (2 + 4 phi) / n for a
+    # plateau of n blocks (Kendall's (1 + 3 phi) / n for a removed mean, plus a slope's
+    # share); left in, the slopes' z came out 15% too wide (sd 1.15 on AR(1) noise of
+    # phi 0.5 in 60-block plateaus), the false-alarm rate at p < 0.001 four times its level.
+    mean_n = n / len(plateaus) + 2.0
+    raw = num / den
+    phi = min(max(raw + (2.0 + 4.0 * raw) / mean_n, 0.0), 0.95)
     for t, r in plateaus:
         e = r - np.polyval(np.polyfit(t, r, 1), t)
         ss += float(np.sum((e[1:] - phi * e[:-1]) ** 2))
