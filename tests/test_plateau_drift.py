@@ -128,8 +128,8 @@ def test_report_shows_the_drift_banner(fading, tmp_path):
 
 def test_creeping_level_is_caught_when_the_offset_is_constant():
     """With the offset model fixed at 'constant' the OFF plateaus show the creep. (With
-    offset='auto' BIC picks the drifting offset, which absorbs a creep linear in time:
-    see the README's limitations.)"""
+    offset='auto' BIC picks the drifting offset, which absorbs a creep linear in time, and
+    nothing is flagged: a known limitation, not yet handled.)"""
     params = bench()
     params["contact"]["level_creep_per_s"] = CREEP_PER_S
     dataset, _ = simulate_bench(params, SEED)
