@@ -20,8 +20,9 @@ from idtool._cli._main import main
 from idtool._data._example import example_params_path
 from idtool._errors import IdtoolError
 from idtool._model._bench import dahl_at_load, on_friction_ratio
+from idtool._model._contact import prescribed_cycle_average
 from idtool._model._coupling import COUPLINGS
-from idtool._simulate._departures import DEPARTURE_KINDS, departure_params
+from idtool._simulate._departures import DEPARTURE_KINDS, DRIFT_KINDS, departure_params
 from idtool._simulate._lag import lag_actuator_force_n
 from idtool._simulate._simulate import (
     TRUTH_FILE,
@@ -291,6 +292,56 @@ def test_offset_drift_is_a_linear_trend_of_the_baseline():
     assert np.std(rates) > 0.1  # the rates do scatter, at the set size (12 draws)
 
 
+def test_fading_horn_raises_the_on_level_as_its_amplitude_fades():
+    """The noise-free force through a 2.5 s ON window of a 20% / 1.5 s fading horn: at the
+    ON level it rises above the same bench's without the fade by ON (FR(a(t)) / FR(a0) - 1)
+    with a(t) = a0 (1 - 0.2 (1 - exp(-t/1.5))), FR from the Dahl contact at the faded slip
+    amplitude (computed here by the contact model itself, not the simulator's interpolated
+    curve, whose error is below 1e-5)."""
+    params = quiet(small_params(on_durations_s=[2.5]))
+    params["horn_fading"] = {"fade_fraction": 0.2, "fade_time_constant_s": 1.5}
+    dataset, truth = simulate_bench(params, SEED)
+    _, plain = simulate_bench(quiet(small_params(on_durations_s=[2.5])), SEED)
+    contact = truth.params.contact
+    for trace, t, plain_t in zip(dataset.traces, truth.traces, plain.traces, strict=True):
+        on0, on1 = t.horn_on_s
+        at_level = (trace.time_s > on1 - 1.0) & (trace.time_s <= on1)  # the ON plateau
+        force = noise_free_force_n(truth.params, t, trace.time_s[at_level])
+        # without the fade: the constant ON level, approached to ~1e-3 N by the actuator
+        steady = noise_free_force_n(plain.params, plain_t, trace.time_s[at_level])
+        law = dahl_at_load(
+            contact.friction_coefficient, contact.contact_stiffness_n_m, t.normal_load_n
+        )
+        speed, w = truth.params.experiments.pull_speed_m_s, 2 * math.pi * 20000.0
+
+        # the plateau's samples, then the switch-off itself
+        t_on = np.append(trace.time_s[at_level], on1) - on0
+        g = 1.0 - 0.2 * (1.0 - np.exp(-t_on / 1.5))
+        fr = [
+            float(prescribed_cycle_average(law, speed, x * t.slip_amplitude_m, w).friction_ratio)
+            for x in (*g, 1.0)
+        ]
+        expected = t.on_force_n * np.array(fr[:-2]) / fr[-1]
+        end = t.on_force_n * fr[-2] / fr[-1]
+        # what the fade adds (up to 3 N), to 1e-5 of the level
+        np.testing.assert_allclose(
+            force - steady, expected - t.on_force_n, atol=1e-5 * t.on_force_n
+        )
+        assert np.all(np.diff(force) > 0)  # the ON level rises through the plateau
+        assert t.on_force_end_n == pytest.approx(end, rel=1e-5)
+
+
+def test_creeping_level_scales_every_level_with_sliding_time():
+    params = quiet(small_params())
+    dataset, _ = simulate_bench(params, SEED)
+    params["contact"]["level_creep_per_s"] = 0.002
+    creeping, truth = simulate_bench(params, SEED)
+    for a, b, t in zip(dataset.traces, creeping.traces, truth.traces, strict=True):
+        factor = 1.0 + 0.002 * np.maximum(a.time_s - t.startup_s, 0.0)
+        offset = t.load_cell_offset_n
+        np.testing.assert_allclose(b.force_n - offset, (a.force_n - offset) * factor, atol=1e-9)
+
+
 # --- the truth-only coupling ----------------------------------------------------------
 
 
@@ -393,7 +444,7 @@ def test_negative_sd_is_refused_naming_the_field(tmp_path, capsys, section, fiel
     assert f"{section}.{field}" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("kind", DEPARTURE_KINDS)
+@pytest.mark.parametrize("kind", DEPARTURE_KINDS + DRIFT_KINDS)
 def test_presets_round_trip_and_keep_the_paper_matrix(kind):
     params = departure_params(kind, 5)
     document = params.to_dict()
@@ -402,8 +453,10 @@ def test_presets_round_trip_and_keep_the_paper_matrix(kind):
     assert e.normal_loads_n == (270.0, 450.0, 670.0) and e.amplitude_fractions == (0.5, 0.7)
     assert min(e.on_durations_s) >= 0.5 and max(e.on_durations_s) <= 2.5
     assert len(experiment_plan(params)) == 24  # as many traces as the example
-    on = set(DEPARTURE_KINDS) if kind == "all" else {kind}
+    on = set(DEPARTURE_KINDS) if kind == "all" else {kind}  # "all": not the drift kinds
     assert ("scatter" in document) == ("scatter" in on)
+    assert (params.horn_fading.fade_fraction == 0.2) == ("fading" in on)
+    assert (params.contact.level_creep_per_s == 0.002) == ("creep" in on)
     assert (params.scatter.friction_ratio_sd, params.scatter.friction_coefficient_sd) == (
         (0.03, 0.007) if "scatter" in on else (0.0, 0.0)
     )

@@ -6,6 +6,7 @@ Gaussian: mean and covariance; a banana that no short run can converge on), the 
 path on a simulated bench's default fit (levels model)."""
 
 import json
+import shutil
 import warnings
 
 import emcee
@@ -69,7 +70,9 @@ def _run(log_prob, ndim, seed=0, **kw):
     bar = Checks()
     opts = {"steps": None, "max_steps": 100_000, "max_minutes": 10.0} | kw
     diag, _ = run_chain(
-        lambda b: emcee.EnsembleSampler(32, ndim, log_prob, vectorize=True, backend=b, moves=_moves()),
+        lambda b: emcee.EnsembleSampler(
+            32, ndim, log_prob, vectorize=True, backend=b, moves=_moves()
+        ),
         state,
         store,
         0,
@@ -124,7 +127,7 @@ def default_fit(tmp_path_factory):
         warnings.simplefilter("ignore")  # the fit's own warnings are not checked here
         fit = idtool.fit(dataset, seed=0)
     folder = tmp_path_factory.mktemp("fits") / "small"
-    fit.save(folder, plots=False)
+    fit.save(folder)
     return folder
 
 
@@ -156,3 +159,21 @@ def test_the_command_line_samples_until_converged_and_records_the_rule(default_f
     assert main(argv) == 3
     doc = json.loads((default_fit / "sample.json").read_text())["diagnostics"]
     assert not doc["converged"] and doc["stopped_by"] == "max_steps"
+
+
+def test_the_examples_default_report_opens_without_a_red_banner(default_fit, tmp_path):
+    """What ``make demo`` shows first: a converged posterior and no banner. The default
+    targets (30%, 50%) need amplitudes below the tested 50-70% on the example: marked in
+    the answer and noted under it; asked for, the same answer is a banner."""
+    folder = tmp_path / "fit"
+    shutil.copytree(default_fit, folder)
+    assert main(["sample", str(folder), "--seed", "0", "--no-progress", "-q"]) == 0
+    assert main(["report", str(folder)]) == 0
+    page = (folder / "report.html").read_text()
+    head = page.split('<section id="answer">')[0]
+    assert 'class="banner"' not in head and "converged" in head
+    answer = page.split('<section id="answer">')[1].split("</section>")[0]
+    assert "(extrapolated)" in answer and "Extrapolated: the default targets" in answer
+    assert main(["report", str(folder), "--targets", "30,50"]) == 0
+    head = (folder / "report.html").read_text().split('<section id="answer">')[0]
+    assert head.count('class="banner"') >= 1 and "Extrapolated answer: amplitude" in head

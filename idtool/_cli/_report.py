@@ -10,9 +10,9 @@ __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
-    from idtool._report._html import TARGETS, write_report
+    from idtool._report._html import write_report
 
-    path = write_report(args.fit, targets=args.targets or TARGETS, loads_n=args.loads or ())
+    path = write_report(args.fit, targets=args.targets, loads_n=args.loads or ())
     print(f"report: {path}")
     return 0
 

@@ -117,6 +117,20 @@ def _banners(doc: dict, meta: dict | None, extrapolation: Sequence[str] = ()) ->
     return "".join(f'<p class="banner">{html.escape(b)}</p>' for b in out)
 
 
+def _unasked_note(extrapolation: Sequence[str]) -> str:
+    """The default targets' extrapolations, under the answer's tables (not a banner: the
+    report chose those targets, nobody asked them of the data)."""
+    items = "".join(
+        f"<li>{html.escape(n.removesuffix(': extrapolation'))}</li>" for n in extrapolation
+    )
+    return (
+        f'<p class="note">Extrapolated: the default targets '
+        f"({', '.join(f'{t:g}%' for t in TARGETS)}) need amplitudes outside the tested "
+        f"range at some loads (marked above); ask for targets the tests reach with idtool "
+        f'report FIT --targets.</p><ul class="note">{items}</ul>'
+    )
+
+
 def _header(fit, meta: dict | None, rid: str) -> str:
     """What a qualification file needs to know first: the material and data, when the
     fit and this report were made, the report id, and the lab's own ``x_*`` fields."""
@@ -166,17 +180,25 @@ def _report_id(folder: Path, targets: Sequence[float], loads_n: Sequence[float])
 
 def write_report(
     fit_folder: str | Path,
-    targets: Sequence[float] = TARGETS,
+    targets: Sequence[float] | None = None,
     loads_n: Sequence[float] = (),
 ) -> Path:
     """Write ``report.html``, ``report.md`` and ``figures/*.png`` into ``fit_folder``.
 
     Args:
         fit_folder: a folder written by ``idtool fit`` (or :meth:`idtool.Fit.save`).
-        targets: friction reductions [%] for which the answer gives the amplitude needed.
+        targets: friction reductions [%] for which the answer gives the amplitude needed
+            (default :data:`TARGETS`).
         loads_n: loads [N] at which to give it, besides the tested ones (those beyond
             the tested range are flagged as extrapolation).
+
+    An answer that extrapolates beyond the tested loads or amplitudes is a red banner
+    when it answers what was asked (``targets`` or ``loads_n`` given); for the default
+    targets, which the report chose and the data may not reach, the answer's table marks
+    it and a note under the table says so.
     """
+    asked = targets is not None or bool(loads_n)
+    targets = TARGETS if targets is None else targets
     for t in targets:
         if not 0.0 < t < 100.0:
             raise IdtoolError(f"targets: {t:g}% is not a reduction in (0, 100)")
@@ -202,7 +224,8 @@ def write_report(
     speed = float(np.median(fit.model.data.pull_speed_m_s))
     rid = _report_id(folder, targets, loads_n)
     first = answer(fit, draws, targets, loads_n)
-    sec: dict[str, str] = {"Answer": f'<div class="answer">{first.html}</div>'}
+    unasked = "" if asked or not first.extrapolation else _unasked_note(first.extrapolation)
+    sec: dict[str, str] = {"Answer": f'<div class="answer">{first.html}{unasked}</div>'}
     md: list[str] = [f"# idtool report: {fit.dataset.name}", "", f"Report {rid}", ""]
     md += [*first.markdown, ""]
 
@@ -359,7 +382,8 @@ def write_report(
         md += ["", f"Dataset sha256 {ds.sha256}; fit command `{doc['command']}`"]
 
     title = f"idtool report: {fit.dataset.name}"
-    banners = _banners(doc, meta, first.extrapolation) + validation_banner(folder)
+    extrapolation = first.extrapolation if asked else []
+    banners = _banners(doc, meta, extrapolation) + validation_banner(folder)
     document = page(title, _header(fit, meta, rid), banners, {n: sec[n] for n in SECTIONS})
     out = write_text_atomic(folder / "report.html", document)
     write_text_atomic(folder / "report.md", "\n".join(md) + "\n")

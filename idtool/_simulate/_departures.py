@@ -43,21 +43,16 @@ from idtool._data._example import example_params_path
 from idtool._errors import IdtoolError
 from idtool._simulate._params import BenchParams
 
-__all__ = ["ALL_KINDS", "DEPARTURE_KINDS", "departure_params"]
+__all__ = ["ALL_KINDS", "DEPARTURE_KINDS", "DRIFT_KINDS", "departure_params"]
 
-DEPARTURE_KINDS = (
-    "clean",
-    "scatter",
-    "actuator",
-    "mains60",
-    "drift",
-    "coupling",
-    "fading",
-    "creep",
-    "all",
-)
-# What "all" turns on: every kind but the plateau drifts (module docstring).
-ALL_KINDS = frozenset(DEPARTURE_KINDS) - {"clean", "fading", "creep", "all"}
+# The departures the fit's model options cover (the coverage studies score these).
+DEPARTURE_KINDS = ("clean", "scatter", "actuator", "mains60", "drift", "coupling", "all")
+# Levels that move within their plateaus: the fit detects them and warns
+# (idtool._fit._plateau_drift), but no model option represents them yet, so their bands
+# are not expected to cover (the fading horn's held-out FR falls outside).
+DRIFT_KINDS = ("fading", "creep")
+# What "all" turns on (module docstring).
+ALL_KINDS = frozenset(DEPARTURE_KINDS) - {"clean", "all"}
 
 # Pull-to-pull scatter: log-normal sd of the per-trace FR and mu multipliers [-].
 SCATTER = {"friction_ratio_sd": 0.03, "friction_coefficient_sd": 0.007}
@@ -91,7 +86,8 @@ _TRUTH_STREAM = 0x7472757468  # "truth"
 
 
 def departure_params(kind: str, seed: int) -> BenchParams:
-    """Simulator parameters with the departure ``kind`` (one of :data:`DEPARTURE_KINDS`).
+    """Simulator parameters with the departure ``kind`` (one of :data:`DEPARTURE_KINDS` or
+    :data:`DRIFT_KINDS`).
 
     ``seed`` (an integer >= 0) draws the true mu, Kt, coupling gain and load scale
     (module docstring); simulate with ``idtool.simulate_bench(params, seed)``.
@@ -99,8 +95,9 @@ def departure_params(kind: str, seed: int) -> BenchParams:
     Raises:
         IdtoolError: an unknown ``kind`` or a bad ``seed``.
     """
-    if kind not in DEPARTURE_KINDS:
-        raise IdtoolError(f"departure kind {kind!r}: use one of {', '.join(DEPARTURE_KINDS)}")
+    if kind not in DEPARTURE_KINDS + DRIFT_KINDS:
+        kinds = ", ".join(DEPARTURE_KINDS + DRIFT_KINDS)
+        raise IdtoolError(f"departure kind {kind!r}: use one of {kinds}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise IdtoolError(f"seed {seed!r}: give an integer >= 0")
     p: dict[str, Any] = json.loads(example_params_path().read_text())
