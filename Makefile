@@ -5,7 +5,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean-venv
+.PHONY: demo test lint bench study clean-venv
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -28,6 +28,12 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_fit.py
 	$(BIN)/python benchmarks/bench_sample.py
 	$(BIN)/python benchmarks/bench_first_result.py
+
+# The defaults on every departure kind of the simulator, 3 seeds each (~15 min on 2
+# cores): run it before closing an issue that touches the fit, the likelihood or the
+# sampler, and quote its table (benchmarks/study_departures.py).
+study: $(STAMP)
+	$(BIN)/python benchmarks/study_departures.py --seeds 3
 
 clean-venv:
 	rm -rf $(VENV)

@@ -22,10 +22,11 @@ that one on the example: 21.5 s in all on 2 cores, 2026-11-24).
   effective samples per step are the same (idtool's, measured on its full run), and
   ESS/s = ESS per step / seconds per step.
 
-Also: the default stretch move against idtool's differential-evolution move (32 x 3000
-each; skip with ``--quick``), and a cross-check of the two log-posteriors at 8 points
-(must agree to 0.2: the contact solvers differ by ~1e-5 in FR, which moves the
-log-posterior by up to ~0.1).
+First: the default posterior (the levels model's) with the moves before and after issue
+26 and a default run until converged (:func:`levels_moves`). Also: the default stretch
+move against idtool's moves (32 x 3000 each; skip with ``--quick``), and a cross-check
+of the two log-posteriors at 8 points (must agree to 0.2: the contact solvers differ by
+~1e-5 in FR, which moves the log-posterior by up to ~0.1).
 
 Targets (issue 5): 32 x 3000 on the example in under 2 minutes on 2 cores; ESS/s at
 least 30x the non-vectorised SciPy run.
@@ -222,12 +223,61 @@ class NumpyPosterior:
         return lp + ll
 
 
+def sample_module_moves():
+    """The moves ``idtool sample`` uses (the SciPy side runs the same)."""
+    from idtool._posterior._sample import _moves
+
+    return _moves()
+
+
+def levels_moves(steps: int = 4000) -> None:
+    """The default posterior (the levels model's) of the example's default fit: the
+    slowest parameter's tau and ESS/s with the move idtool used before issue 26 (DE alone)
+    and with today's (DE and snooker, half and half), each 32 x ``steps``; then a default
+    run until converged."""
+    import emcee
+
+    import idtool
+    import idtool._posterior._sample as sample_module
+
+    fit = idtool.fit(idtool.load_dataset(idtool.example_dataset_path()), seed=0)
+    today = sample_module._moves
+    runs = {}
+    for label, moves in (
+        ("DE alone (before)", lambda: [(emcee.moves.DEMove(), 1.0)]),
+        ("DE + snooker (today)", today),
+    ):
+        sample_module._moves = moves
+        try:
+            runs[label] = fit.sample(walkers=WALKERS, steps=steps, seed=0)
+        finally:
+            sample_module._moves = today
+    until = fit.sample(seed=0)
+    print()
+    print(f"levels posterior of the example's default fit, {WALKERS} walkers x {steps} steps:")
+    print(f"{'moves':24}{'slowest':>16}{'tau':>7}{'bulk ESS':>10}{'s':>7}{'ESS/s':>8}{'acc':>6}")
+    for label, post in [*runs.items(), ("until converged (today)", until)]:
+        d = post.diagnostics
+        sampling = post.timing["sampling_s"]
+        ess = float(np.min(d.ess_bulk))
+        print(
+            f"{label:24}{d.slowest:>16}{np.max(d.tau):7.1f}{ess:10.0f}{sampling:7.1f}"
+            f"{ess / sampling:8.0f}{np.mean(d.acceptance):6.2f}"
+        )
+    d = until.diagnostics
+    print(
+        f"until converged: {d.steps} steps, {until.timing['total_s']:.1f} s in all "
+        f"(compile {until.timing['compile_s']:.1f} s), stopped by {d.stopped_by}"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="skip the stretch-move run")
     parser.add_argument("--scipy-steps", type=int, default=5)
     args = parser.parse_args()
     total0 = time.perf_counter()
+    levels_moves()
 
     import emcee
 
@@ -249,6 +299,7 @@ def main() -> None:
             fit, walkers=WALKERS, steps=STEPS, seed=0, chain_path=Path(tmp) / "chain.h5"
         )
     assert np.array_equal(post.chain, post_file.chain), "checkpointing changed the chain"
+    moves = sample_module_moves()
     stretch = None
     if not args.quick:
         print("idtool: the same with emcee's default stretch move ...", flush=True)
@@ -274,7 +325,7 @@ def main() -> None:
         WALKERS,
         kept.shape[1],
         numpy_lp,
-        moves=[(emcee.moves.DEMove(), 1.0)],
+        moves=moves,
     )
     start = post.chain[-1]
     numpy_lp.evaluations = 0

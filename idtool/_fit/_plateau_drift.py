@@ -33,6 +33,18 @@ relative change of the same sign at least :data:`MIN_RELATIVE_CHANGE` (a drift t
 to matter for a friction ratio is not reported, however many traces show it). A load-cell
 offset drift that the fit models (offset model ``drift``) is in the model, so its
 residuals carry none of it.
+
+A creeping friction level is the exception: with the offset model ``drift`` chosen (by
+BIC, as it is on such a bench) each trace's fitted offset drift takes up most of it, and
+the plateaus' residuals keep little. What tells the two apart is the physics: a load
+cell's drift is additive, the same newtons per second whatever the load, while a creeping
+friction coefficient moves the force in proportion to it. So the fitted drift rates
+``d_i`` [N/s] are regressed on the traces' OFF levels ``L_i`` [N], ``d_i = a + c L_i``
+(ordinary least squares with an intercept, so a drift common to every pull stays in
+``a``): ``c`` [1/s] is the relative creep rate, tested by its t statistic on ``n - 2``
+degrees of freedom (the drift rates' scatter from pull to pull estimated by the
+regression itself) at :data:`P_ALARM`, and reported when ``c`` times the median trace
+duration reaches the OFF plateau's :data:`MIN_RELATIVE_CHANGE` (:class:`LevelCreep`).
 """
 
 from __future__ import annotations
@@ -52,7 +64,9 @@ __all__ = [
     "MIN_BLOCKS",
     "MIN_RELATIVE_CHANGE",
     "P_ALARM",
+    "LevelCreep",
     "PlateauDrift",
+    "level_creep",
     "plateau_drift",
     "plateau_noise",
     "pooled_drift",
@@ -115,6 +129,59 @@ class PlateauDrift:
             "level constant, so its levels are averages over the plateau and the "
             "friction ratios depend on the window's length"
         )
+
+
+@dataclasses.dataclass(frozen=True)
+class LevelCreep:
+    """The fitted offset drift rates against the OFF levels (module docstring): the
+    relative creep rate ``rate_per_s`` [1/s] and its ``se``, the t ``statistic`` on
+    ``n_traces - 2`` degrees of freedom and its two-sided ``p_value``, the relative change
+    over the median trace duration ``median_duration_s`` [s], ``flagged`` whether it warns."""
+
+    kind: str
+    n_traces: int
+    rate_per_s: float
+    se: float
+    statistic: float
+    p_value: float
+    median_relative_change: float
+    median_duration_s: float
+    flagged: bool
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    def sentence(self) -> str:
+        verb = "rises" if self.rate_per_s > 0 else "falls"
+        return (
+            f"{DRIFT}: the friction level {verb} by {100 * abs(self.median_relative_change):.1f}% "
+            f"over {self.median_duration_s:.1f} s (median trace), in proportion to the load: "
+            f"the fitted load-cell offset drifts of the {self.n_traces} traces grow with their "
+            f"OFF levels at {100 * self.rate_per_s:+.3f}%/s (t = {self.statistic:+.1f}, p = "
+            f"{self.p_value:.2g}), where a load cell's drift would not depend on the load: "
+            "the friction may be creeping (webbing warming or wearing in), not the offset"
+        )
+
+
+def level_creep(rates_n_s: np.ndarray, off_n: np.ndarray, duration_s: np.ndarray) -> LevelCreep:
+    """:class:`LevelCreep` from the traces' fitted offset drift rates [N/s], OFF levels [N]
+    and durations [s] (module docstring)."""
+    from scipy.stats import t as student_t
+
+    n = rates_n_s.size
+    x = off_n - off_n.mean()
+    sxx = float(x @ x)
+    if n < 4 or sxx <= 0.0:  # no leverage: one load, or too few traces
+        return LevelCreep("creep", n, 0.0, math.inf, 0.0, 1.0, 0.0, 0.0, False)
+    c = float(x @ rates_n_s) / sxx
+    e = rates_n_s - rates_n_s.mean() - c * x
+    se = math.sqrt(float(e @ e) / (n - 2) / sxx)
+    stat = c / se if se > 0.0 else math.inf
+    p = float(2.0 * student_t.sf(abs(stat), n - 2))
+    duration = float(np.median(duration_s))
+    change = c * duration
+    flagged = p < P_ALARM and abs(change) >= MIN_RELATIVE_CHANGE["OFF"]
+    return LevelCreep("creep", n, c, se, stat, p, change, duration, bool(flagged))
 
 
 def slope_and_se(time_s: np.ndarray, r: np.ndarray, phi: float, sigma: float):
@@ -186,9 +253,10 @@ def _plateaus(result: FitResult, levels: np.ndarray) -> list[tuple[int, str, flo
     return out
 
 
-def plateau_drift(result: FitResult) -> dict[str, PlateauDrift]:
-    """The pooled ON and OFF plateau trends of ``result`` (module docstring). NumPy on
-    the host plus one run of the fit's compiled program for its block means."""
+def plateau_drift(result: FitResult) -> dict[str, PlateauDrift | LevelCreep]:
+    """The pooled ON and OFF plateau trends of ``result`` and, with the offset model
+    ``drift``, the creep test on its drift rates (module docstring). NumPy on the host
+    plus one run of the fit's compiled program for its block means."""
     model = result.model
     d = model.data
     z = np.asarray(result.z, float)
@@ -215,11 +283,16 @@ def plateau_drift(result: FitResult) -> dict[str, PlateauDrift]:
         level = out[i] if kind == "OFF" else out[m + i]
         duration = float(t[-1] - t[0] + d.block_s)
         found[kind].append((i, b / se, b * duration / level, duration))
-    pooled = {}
+    pooled: dict[str, PlateauDrift | LevelCreep] = {}
     for kind, rows in found.items():
         arr = np.array([row[1:] for row in rows]).reshape(-1, 3)
         n_traces = len({row[0] for row in rows})
         pooled[kind] = pooled_drift(kind, arr[:, 0], arr[:, 1], arr[:, 2], n_traces)
+    values = model.values(z)
+    if "offset_drift_n_s" in values:
+        rates = np.broadcast_to(np.asarray(values["offset_drift_n_s"], float), (m,))
+        durations = np.array([np.ptp(times[block_trace == i]) + d.block_s for i in range(m)])
+        pooled["creep"] = level_creep(rates, out[:m], durations)
     return pooled
 
 

@@ -165,12 +165,14 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
 
 def _plateau_drift_json(r: FitResult) -> dict:
     """Per kind of plateau (ON, OFF): how many were tested and significant, the median
-    relative change and duration, the pooled statistic and p-value (``_fit/_plateau_drift.py``)."""
+    relative change and duration, the pooled statistic and p-value; with a drifting offset,
+    the creep test on its rates (``creep``) (``_fit/_plateau_drift.py``)."""
     if r.plateau_drift is None:
         return {"on": False}
     return {
         "on": True,
-        "test": "Stouffer's z of the plateaus' residual slopes, AR(1) standard errors",
+        "test": "Stouffer's z of the plateaus' residual slopes, AR(1) standard errors; creep: "
+        "t test of the fitted offset drift rates' slope against the OFF levels",
         "p_alarm": P_ALARM,
         "min_relative_change": dict(MIN_RELATIVE_CHANGE),
         **{kind: p.to_dict() for kind, p in r.plateau_drift.items()},

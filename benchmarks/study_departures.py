@@ -1,0 +1,145 @@
+"""Study: the defaults a new user gets, on benches that depart from the fit's model.
+
+For every departure kind of the simulator (idtool._simulate._departures: the covered
+kinds and the plateau drifts) and ``--seeds`` seeds each, on the paper's matrix (24
+traces): simulate, ``idtool.fit(dataset)`` with its defaults, ``Fit.sample()`` with its
+defaults (until converged), then score against the truth:
+
+* the sampler: converged in one default run (yes/no), steps, seconds, slowest tau;
+* held-out friction ratio at 6 operating points (360 and 560 N x 50, 60, 70%) inside its
+  95% band, from the fit's covariance and from the posterior;
+* Kt and mu inside their 95% intervals, the fit's and the posterior's, and their
+  relative errors; the mean half-width of the FR band at the paper's matrix;
+* which warnings fired (plateau drift, misfit).
+
+Run: ``make study`` (3 seeds per kind, about 15 minutes on 2 cores) or
+``.venv/bin/python benchmarks/study_departures.py --seeds 1 --kinds coupling,fading``.
+The per-kind table it prints is what a closing note quotes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+import warnings
+
+import numpy as np
+
+HELD_OUT = ([360.0, 560.0], [0.5, 0.6, 0.7])
+MATRIX = ([270.0, 450.0, 670.0], [0.5, 0.7])
+
+
+def score(kind: str, seed: int) -> dict:
+    import idtool
+    from idtool._fit._plateau_drift import DRIFT
+    from idtool._fit._variability import MISFIT
+    from idtool._simulate._departures import departure_params
+    from idtool._simulate._simulate import true_friction_ratio
+
+    params = departure_params(kind, seed)
+    dataset, _ = idtool.simulate_bench(params, seed=seed)
+    truth = {
+        "Kt": params.contact.contact_stiffness_n_m,
+        "mu": params.contact.friction_coefficient,
+    }
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the fit's warnings are scored below
+        fit = idtool.fit(dataset, seed=0)
+    fit_s = time.perf_counter() - t0
+    true_fr = [true_friction_ratio(params, n, a) for n in HELD_OUT[0] for a in HELD_OUT[1]]
+
+    def inside(preds) -> list[bool]:
+        return [p.ci95[0] <= t <= p.ci95[1] for p, t in zip(preds, true_fr, strict=True)]
+
+    out: dict = {"kind": kind, "seed": seed, "fit_s": fit_s}
+    out["fit_fr"] = inside(fit.predict(*HELD_OUT))
+    for name, value in truth.items():
+        est = fit.estimates[name]
+        out[f"fit_{name}"] = est.ci95[0] <= value <= est.ci95[1]
+        out[f"fit_{name}_err"] = est.estimate / value - 1.0
+        out[f"fit_{name}_decades"] = float(np.log10(est.ci95[1] / est.ci95[0]))
+    out["drift_warning"] = any(w.startswith(DRIFT) for w in fit.warnings)
+    out["misfit_warning"] = any(w.startswith(MISFIT) for w in fit.warnings)
+
+    t0 = time.perf_counter()
+    post = fit.sample(seed=0)
+    out["sample_s"] = time.perf_counter() - t0
+    d = post.diagnostics
+    out |= {"converged": d.converged, "steps": d.steps, "slowest": d.slowest}
+    out["tau"] = float(np.max(d.tau))
+    summary = post.summary()
+    for name, value in truth.items():
+        lo, hi = summary[name]["ci95"]
+        out[f"post_{name}"] = lo <= value <= hi
+        out[f"post_{name}_err"] = summary[name]["median"] / value - 1.0
+        out[f"post_{name}_decades"] = float(np.log10(hi / lo))
+    preds = fit.predict(*HELD_OUT)
+    out["post_fr"] = inside(preds)
+    out["half_width"] = float(np.mean([(p.ci95[1] - p.ci95[0]) / 2 for p in fit.predict(*MATRIX)]))
+    return out
+
+
+def table(rows: list[dict]) -> None:
+    kinds = list(dict.fromkeys(r["kind"] for r in rows))
+    head = (
+        f"{'kind':9}{'conv':>6}{'steps':>7}{'s':>6}{'tau':>6} {'slowest':15}"
+        f"{'FR fit':>8}{'FR post':>8}{'Kt fit':>7}{'Kt post':>8}{'mu fit':>7}{'mu post':>8}"
+        f"{'Kt err':>8}{'mu err':>8}{'Kt dec':>7}{'hw':>7}{'drift':>6}{'misfit':>7}"
+    )
+    print(head)
+    totals: dict[str, list] = {}
+    for kind in kinds:
+        rs = [r for r in rows if r["kind"] == kind]
+        n = len(rs)
+
+        def frac(key: str, rs=rs) -> str:
+            flat = np.concatenate([np.atleast_1d(r[key]) for r in rs])
+            totals.setdefault(key, []).extend(flat.tolist())
+            return f"{int(flat.sum())}/{flat.size}"
+
+        slowest = max(rs, key=lambda r: r["tau"])
+        print(
+            f"{kind:9}{frac('converged'):>6}{np.mean([r['steps'] for r in rs]):7.0f}"
+            f"{np.max([r['sample_s'] for r in rs]):6.0f}{slowest['tau']:6.0f} "
+            f"{slowest['slowest']:15}{frac('fit_fr'):>8}{frac('post_fr'):>8}"
+            f"{frac('fit_Kt'):>7}{frac('post_Kt'):>8}{frac('fit_mu'):>7}{frac('post_mu'):>8}"
+            f"{np.mean([abs(r['post_Kt_err']) for r in rs]):8.1%}"
+            f"{np.mean([abs(r['post_mu_err']) for r in rs]):8.2%}"
+            f"{max(max(r['fit_Kt_decades'], r['post_Kt_decades']) for r in rs):7.2f}"
+            f"{np.mean([r['half_width'] for r in rs]):7.4f}"
+            f"{sum(r['drift_warning'] for r in rs):>4}/{n}"
+            f"{sum(r['misfit_warning'] for r in rs):>5}/{n}"
+        )
+    print("overall: " + ", ".join(f"{k} {np.mean(v):.0%}" for k, v in totals.items()))
+
+
+def main() -> None:
+    from idtool._simulate._departures import DEPARTURE_KINDS, DRIFT_KINDS
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=3, help="seeds per kind (default 3)")
+    parser.add_argument("--kinds", default=",".join(DEPARTURE_KINDS + DRIFT_KINDS))
+    args = parser.parse_args()
+    started = time.perf_counter()
+    rows = []
+    kinds = args.kinds.split(",")
+    for k, kind in enumerate(kinds):
+        for s in range(1, args.seeds + 1):
+            # every dataset its own seed (kinds sharing seeds would share noise draws)
+            r = score(kind, 100 * k + s)
+            rows.append(r)
+            print(
+                f"  {kind} seed {r['seed']}: converged {r['converged']} in {r['steps']} steps "
+                f"{r['sample_s']:.0f} s (fit {r['fit_s']:.0f} s), FR fit {sum(r['fit_fr'])}/6 "
+                f"post {sum(r['post_fr'])}/6, Kt {r['fit_Kt']}/{r['post_Kt']}, "
+                f"mu {r['fit_mu']}/{r['post_mu']}, drift warning {r['drift_warning']}",
+                flush=True,
+            )
+    print()
+    table(rows)
+    print(f"study in {time.perf_counter() - started:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
