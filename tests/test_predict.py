@@ -69,7 +69,8 @@ def test_sample_command_writes_the_posterior_next_to_the_fit(sampled, capsys):
     doc = json.loads((sampled / "sample.json").read_text())
     diag = doc["diagnostics"]
     assert not diag["converged"] and diag["steps_needed"] > 0
-    assert set(diag["parameters"]["Kt"]) == {"tau", "ess", "rhat"}
+    assert set(diag["parameters"]["Kt"]) == {"tau", "tau_change", "ess", "ess_bulk", "rhat"}
+    assert diag["stopped_by"] == "steps" and diag["rule"]
     assert 0 < diag["acceptance_fraction"]["mean"] < 1
     # this two-load fit's own levels cannot inform every physical parameter, so it keeps
     # the noise-only model, and the sampler the traces' own likelihood

@@ -167,7 +167,7 @@ def test_the_examples_default_report_opens_without_a_red_banner(default_fit, tmp
     the answer and noted under it; asked for, the same answer is a banner."""
     folder = tmp_path / "fit"
     shutil.copytree(default_fit, folder)
-    assert main(["sample", str(folder), "--seed", "0", "--no-progress", "-q"]) == 0
+    assert main(["sample", str(folder), "--seed", "0", "--no-progress", "-q", "--force"]) == 0
     assert main(["report", str(folder)]) == 0
     page = (folder / "report.html").read_text()
     head = page.split('<section id="answer">')[0]

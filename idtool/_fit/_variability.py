@@ -345,7 +345,12 @@ def with_variability(result: FitResult) -> FitResult:
         estimates[spec.name] = estimate_of(spec, z[i], se_z[i])
     g, jac = model_log_levels(model, z, result.phi)
     fr = np.exp(g[m:])
-    fr_se = fr * np.sqrt(np.einsum("ij,jk,ik->i", jac[m:], v.cov_theta, jac[m:]))
+    # the delta method's variance as a sum of squares over the covariance's eigenvectors:
+    # never negative, where the quadratic form j C j' came out -3.7e-4 by round-off when
+    # one direction of C is unidentified (eigenvalues 1.5e-5 to 2.1e12 on two loads with
+    # short ON windows, tests/test_fit.py) and failed the fit under warnings as errors
+    w, u = np.linalg.eigh(v.cov_theta)
+    fr_se = fr * np.sqrt(np.sum((jac[m:] @ u) ** 2 * np.maximum(w, 0.0), axis=1))
     return dataclasses.replace(
         result,
         z=z,
