@@ -224,10 +224,11 @@ class NumpyPosterior:
 
 
 def sample_module_moves():
-    """The moves ``idtool sample`` uses (the SciPy side runs the same)."""
+    """The moves ``idtool sample`` uses on the noise-only posterior (the SciPy side runs
+    the same)."""
     from idtool._posterior._sample import _moves
 
-    return _moves()
+    return _moves("ar1")
 
 
 def levels_moves(steps: int = 4000) -> None:
@@ -244,7 +245,7 @@ def levels_moves(steps: int = 4000) -> None:
     today = sample_module._moves
     runs = {}
     for label, moves in (
-        ("DE alone (before)", lambda: [(emcee.moves.DEMove(), 1.0)]),
+        ("DE alone (before)", lambda *_: [(emcee.moves.DEMove(), 1.0)]),
         ("DE + snooker (today)", today),
     ):
         sample_module._moves = moves
@@ -305,7 +306,7 @@ def main() -> None:
         print("idtool: the same with emcee's default stretch move ...", flush=True)
         import idtool._posterior._sample as sample_module
 
-        sample_module._moves = lambda: [(emcee.moves.StretchMove(), 1.0)]
+        sample_module._moves = lambda *_: [(emcee.moves.StretchMove(), 1.0)]
         stretch = sample_posterior(fit, walkers=WALKERS, steps=STEPS, seed=0)
 
     # the same posterior in NumPy/SciPy

@@ -23,6 +23,7 @@ import numpy as np
 from idtool._atomic import atomic_output_dir
 from idtool._data._dataset import Dataset, load_dataset
 from idtool._data._write import write_dataset
+from idtool._diagnostic import from_records
 from idtool._errors import IdtoolError
 from idtool._fit._result import Estimate, FitResult
 from idtool._fit._run import FitRun
@@ -137,11 +138,16 @@ class Fit:
         return {w["law"]: w for w in doc.get("coupling_laws", [])}
 
     def _sentences(self, key: str) -> list[str]:
-        """The fit's ``warnings`` or ``notes``: in memory, or from ``fit.json`` (same key;
-        fits written before notes existed have none)."""
+        """The fit's ``warnings`` or ``notes``: in memory, or from ``fit.json``: its
+        ``diagnostic_records`` (codes and values kept), else the plain sentences of a fit
+        written before them (and before notes existed: none)."""
         if isinstance(self._state, FitResult):
             return list(getattr(self._state, key))
-        return list(self._state.doc.get(key, []))
+        doc = self._state.doc
+        if "diagnostic_records" in doc:
+            severity = "warning" if key == "warnings" else "note"
+            return [d for d in from_records(doc["diagnostic_records"]) if d.severity == severity]
+        return list(doc.get(key, []))
 
     @property
     def result(self) -> FitResult:

@@ -40,6 +40,7 @@ import numpy as np
 import pytest
 
 import idtool
+from idtool._diagnostic import with_code
 from idtool._simulate._departures import DEPARTURE_KINDS, departure_params
 from idtool._simulate._simulate import true_friction_ratio
 
@@ -86,9 +87,7 @@ def _score(kind: str, seed: int) -> dict:
         "half_width": half_width(fit),
         "actuator": fit.model.actuator.name,
         "offset": fit.model.offset.name,
-        "misspecified": any(
-            w.startswith("the physical model misses the operating points") for w in fit.warnings
-        ),
+        "misspecified": bool(with_code(fit.warnings, "misfit_operating_points")),
     }
     if plain is not None:
         out["half_width_noise_only"] = half_width(plain)

@@ -16,6 +16,7 @@ from test_departures import small_params
 
 import idtool
 from idtool import simulate_bench
+from idtool._diagnostic import with_code
 from idtool._fit._plateau_drift import (
     DRIFT,
     EDGE_S,
@@ -41,7 +42,9 @@ def bench(**edits) -> dict:
 
 
 def drift_warnings(fit) -> list[str]:
-    return [w for w in fit.warnings if w.startswith(DRIFT)]
+    found = with_code(fit.warnings, "drift_on", "drift_off", "drift_creep")
+    assert all(w.startswith(DRIFT) for w in found)  # the banner's heading reads as a sentence
+    return found
 
 
 @pytest.fixture(scope="module")
@@ -122,7 +125,8 @@ def test_report_shows_the_drift_banner(fading, tmp_path):
     assert block["on"] and block["ON"]["flagged"] and block["ON"]["n_plateaus"] == 2
     assert block["p_alarm"] == P_ALARM
     stored = idtool.load_fit(folder)
-    assert any(w.startswith(DRIFT) for w in stored.warnings)
+    assert [w.code for w in drift_warnings(stored)] == ["drift_on"]  # read back as records
+    assert stored.warnings == idtool.load_fit(folder).warnings
     page = idtool.write_report(folder).read_text()
     assert '<p class="banner">Level drift: a level drifts within its plateaus' in page
 

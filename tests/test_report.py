@@ -136,11 +136,8 @@ def test_banners_only_for_what_is_wrong(fitted):
     warning of the fit."""
     page = (fitted / "report.html").read_text()
     assert "did NOT converge" not in page
-    misfit = [
-        w
-        for w in json.loads((fitted / "fit.json").read_text())["warnings"]
-        if w.startswith("the physical model misses")
-    ]
+    records = json.loads((fitted / "fit.json").read_text())["diagnostic_records"]
+    misfit = [r for r in records if r["code"] in ("misfit_levels", "misfit_operating_points")]
     assert page.count('<p class="banner">Model misfit: ') == len(misfit)
 
 

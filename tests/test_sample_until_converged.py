@@ -157,8 +157,12 @@ def test_the_command_line_samples_until_converged_and_records_the_rule(default_f
     # the bound, on the command line: exit 3 (written, not converged), and says which bound
     argv = [*argv, "--max-steps", str(FIRST_CHECK)]
     assert main(argv) == 3
-    doc = json.loads((default_fit / "sample.json").read_text())["diagnostics"]
+    sample = json.loads((default_fit / "sample.json").read_text())
+    doc = sample["diagnostics"]
     assert not doc["converged"] and doc["stopped_by"] == "max_steps"
+    # the verdict as a record, which the report's banner reads
+    (record,) = [r for r in sample["diagnostic_records"] if r["code"] == "not_converged"]
+    assert record["values"]["stopped_by"] == "max_steps" and record["values"]["steps"] == 400
 
 
 def test_the_examples_default_report_opens_without_a_red_banner(default_fit, tmp_path):

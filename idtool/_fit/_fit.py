@@ -29,6 +29,7 @@ import jax
 import numpy as np
 
 from idtool._data._blocks import FitData
+from idtool._diagnostic import Diagnostic
 from idtool._fit._lm import LMResult
 from idtool._fit._program import run_lm, unwhiten
 from idtool._fit._result import Estimate, FitResult, estimate_of
@@ -300,13 +301,25 @@ def _summarise(
         value, (lo, hi), at_bound = est.estimate, est.ci95, est.at_bound
         if spec.physical and at_bound:
             warnings.append(
-                f"{spec.name} = {value:.4g} {spec.unit} sits at the bound of its range "
-                f"[{spec.lo:g}, {spec.hi:g}]: the data push it outside what the model allows"
+                Diagnostic(
+                    "bound",
+                    f"{spec.name} = {value:.4g} {spec.unit} sits at the bound of its range "
+                    f"[{spec.lo:g}, {spec.hi:g}]: the data push it outside what the model "
+                    "allows",
+                    parameter=spec.name,
+                    value=value,
+                    range=(spec.lo, spec.hi),
+                )
             )
         elif spec.physical and spec.bounded and hi / max(lo, 1e-300) > 100.0:
             warnings.append(
-                f"{spec.name}: its 95% interval spans more than a factor of 100 "
-                f"({lo:.3g} to {hi:.3g} {spec.unit}); the data cannot inform it"
+                Diagnostic(
+                    "uninformed",
+                    f"{spec.name}: its 95% interval spans more than a factor of 100 "
+                    f"({lo:.3g} to {hi:.3g} {spec.unit}); the data cannot inform it",
+                    parameter=spec.name,
+                    ci95=(lo, hi),
+                )
             )
     labels = {s.name: s.fixed_label for s in model.settings}
     for name, value in model.fixed.items():  # the user's (or rig's) values, said so
@@ -319,23 +332,44 @@ def _summarise(
         for b in range(a + 1, k):
             if abs(corr[a, b]) > 0.95:
                 warnings.append(
-                    f"{specs[a].name} and {specs[b].name} are correlated at "
-                    f"{corr[a, b]:+.3f}: the data mostly inform a combination of the two"
+                    Diagnostic(
+                        "correlation",
+                        f"{specs[a].name} and {specs[b].name} are correlated at "
+                        f"{corr[a, b]:+.3f}: the data mostly inform a combination of the two",
+                        parameters=(specs[a].name, specs[b].name),
+                        correlation=float(corr[a, b]),
+                    )
                 )
     if evals[0] < 1e-12 * evals[-1]:
         v = evecs[:, 0]
         top = np.argsort(-np.abs(v))[:3]
         combo = ", ".join(f"{specs[j].name} ({v[j]:+.2f})" for j in top)
-        warnings.append(f"near-singular direction in parameter space: {combo}")
+        warnings.append(
+            Diagnostic(
+                "singular",
+                f"near-singular direction in parameter space: {combo}",
+                eigenvalue_ratio=float(evals[0] / evals[-1]),
+            )
+        )
     loads = np.unique(data.normal_load_n)
     if len(model.coupling.fit_params) > 1 and loads.size == 1:
         warnings.append(
-            f"all traces share one normal load ({loads[0]:g} N): the {model.coupling.name} "
-            "coupling's shape only shows through the load dependence, so it cannot be told "
-            "apart from the constant coupling; use --coupling constant or add loads"
+            Diagnostic(
+                "single_load",
+                f"all traces share one normal load ({loads[0]:g} N): the "
+                f"{model.coupling.name} coupling's shape only shows through the load "
+                "dependence, so it cannot be told apart from the constant coupling; use "
+                "--coupling constant or add loads",
+                normal_load_n=float(loads[0]),
+            )
         )
     if not converged:
-        warnings.append("Levenberg-Marquardt stopped before its tolerance; check the fit")
+        warnings.append(
+            Diagnostic(
+                "lm_not_converged",
+                "Levenberg-Marquardt stopped before its tolerance; check the fit",
+            )
+        )
 
     offs = len(specs)
     fr = vals[offs : offs + data.n_traces]

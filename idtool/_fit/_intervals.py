@@ -17,6 +17,7 @@ import dataclasses
 
 import numpy as np
 
+from idtool._diagnostic import Diagnostic
 from idtool._fit._program import run_lm
 from idtool._fit._result import Z95, Z_AT_BOUND, FitResult
 
@@ -90,10 +91,17 @@ def check_intervals(result: FitResult) -> FitResult:
         (lo, rise_lo), (hi, rise_hi) = ends
         estimates[name] = dataclasses.replace(est, ci95=(lo, hi))
         warnings.append(
-            f"{name}: the Gauss-Newton 95% interval [{est.ci95[0]:.4g}, {est.ci95[1]:.4g}] "
-            f"{spec.unit} is too narrow: refitting the others there, -2 log L rises only "
-            f"{rise_lo:.2f} and {rise_hi:.2f} (3.84 expected); the profile-likelihood "
-            f"interval [{lo:.4g}, {hi:.4g}] is reported instead. The data barely inform it"
+            Diagnostic(
+                "profile_interval",
+                f"{name}: the Gauss-Newton 95% interval [{est.ci95[0]:.4g}, "
+                f"{est.ci95[1]:.4g}] {spec.unit} is too narrow: refitting the others there, "
+                f"-2 log L rises only {rise_lo:.2f} and {rise_hi:.2f} (3.84 expected); the "
+                f"profile-likelihood interval [{lo:.4g}, {hi:.4g}] is reported instead. The "
+                "data barely inform it",
+                parameter=name,
+                wald_ci95=est.ci95,
+                profile_ci95=(lo, hi),
+            )
         )
     return dataclasses.replace(result, estimates=estimates, warnings=warnings)
 

@@ -54,6 +54,7 @@ import math
 
 import numpy as np
 
+from idtool._diagnostic import Diagnostic
 from idtool._fit._free_levels import MIN_AT_LEVEL_S, _at_level_s
 from idtool._fit._program import run_lm, unwhiten
 from idtool._fit._result import FitResult
@@ -120,7 +121,7 @@ class PlateauDrift:
             if self.kind == "OFF"
             else "the reduction may be building up through the window"
         )
-        return (
+        message = (
             f"{DRIFT}: the {level} level {verb} by "
             f"{100 * abs(self.median_relative_change):.1f}% over "
             f"{self.median_duration_s:.1f} s (median) in {self.n_same_sign} of "
@@ -129,6 +130,7 @@ class PlateauDrift:
             "level constant, so its levels are averages over the plateau and the "
             "friction ratios depend on the window's length"
         )
+        return Diagnostic(f"drift_{self.kind.lower()}", message, **self.to_dict())
 
 
 @dataclasses.dataclass(frozen=True)
@@ -153,7 +155,7 @@ class LevelCreep:
 
     def sentence(self) -> str:
         verb = "rises" if self.rate_per_s > 0 else "falls"
-        return (
+        message = (
             f"{DRIFT}: the friction level {verb} by {100 * abs(self.median_relative_change):.1f}% "
             f"over {self.median_duration_s:.1f} s (median trace), in proportion to the load: "
             f"the fitted load-cell offset drifts of the {self.n_traces} traces grow with their "
@@ -161,6 +163,7 @@ class LevelCreep:
             f"{self.p_value:.2g}), where a load cell's drift would not depend on the load: "
             "the friction may be creeping (webbing warming or wearing in), not the offset"
         )
+        return Diagnostic("drift_creep", message, **self.to_dict())
 
 
 def level_creep(rates_n_s: np.ndarray, off_n: np.ndarray, duration_s: np.ndarray) -> LevelCreep:

@@ -26,6 +26,7 @@ import numpy as np
 from idtool._data._blocks import FitData, prepare_fit_data
 from idtool._data._dataset import Dataset
 from idtool._data._mains import resolve_mains
+from idtool._diagnostic import Diagnostic
 from idtool._errors import IdtoolError
 from idtool._fit._detuning import (
     DETUNING,
@@ -180,7 +181,7 @@ def fit_dataset(
 
     mains, mains_source, run_warnings = resolve_mains(dataset, mains_hz)
     data = prepare_fit_data(dataset, mains_hz=mains, periods_per_block=2, mains_source=mains_source)
-    run_warnings += data.notes  # the mains frequency and the blocks
+    run_warnings = [Diagnostic("data", w) for w in [*run_warnings, *data.notes]]  # mains, blocks
     laws: tuple[str, ...] = (law,)
     if compare_laws:
         laws = tuple(n for n in FRICTION_LAWS if FRICTION_LAWS.get(n).fit_params)
@@ -256,7 +257,9 @@ def fit_dataset(
                     del profiles[DETUNING]
                     best = detuned
             if warn:
-                best = dataclasses.replace(best, warnings=[*best.warnings, sentence])
+                best = dataclasses.replace(
+                    best, warnings=[*best.warnings, Diagnostic("detuning", sentence)]
+                )
             else:
                 best = dataclasses.replace(best, notes=[*best.notes, sentence])
             candidates[best_key] = best
@@ -276,12 +279,16 @@ def fit_dataset(
         rivals = [w for w in weights.values() if w is not chosen and w.bic_weight > 0.05]
         if rivals:  # the data do not single out the coupling's shape
             run_warnings.append(
-                f"the coupling laws fit comparably (BIC weight {chosen.law} "
-                f"{chosen.bic_weight:.2f}, "
-                + ", ".join(f"{w.law} {w.bic_weight:.2f}" for w in rivals)
-                + "): the estimates are the chosen law's; predictions average the laws by "
-                "their BIC weights, so where the laws disagree (between or beyond the "
-                "measured operating points) the bands include their spread"
+                Diagnostic(
+                    "coupling_laws",
+                    f"the coupling laws fit comparably (BIC weight {chosen.law} "
+                    f"{chosen.bic_weight:.2f}, "
+                    + ", ".join(f"{w.law} {w.bic_weight:.2f}" for w in rivals)
+                    + "): the estimates are the chosen law's; predictions average the laws "
+                    "by their BIC weights, so where the laws disagree (between or beyond the "
+                    "measured operating points) the bands include their spread",
+                    bic_weights={w.law: w.bic_weight for w in (chosen, *rivals)},
+                )
             )
         if run_warnings:  # for the fit report
             best = candidates[best_key] = dataclasses.replace(

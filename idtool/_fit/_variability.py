@@ -51,6 +51,7 @@ import math
 import numpy as np
 import scipy.special
 
+from idtool._diagnostic import Diagnostic
 from idtool._fit._free_levels import MIN_AT_LEVEL_S, FreeLevels, free_levels, model_log_levels
 from idtool._fit._level_design import level_design
 from idtool._fit._reml import GRID, at_sds, covariance, evaluate, fit_sds
@@ -258,20 +259,32 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
     warnings = []
     if p_value < 0.01:
         warnings.append(
-            f"{MISFIT} the traces' own levels by more than their noise "
-            f"explains (chi2 = {chi2:.1f} on {dof} degrees of freedom, p = {p_value:.2g}): "
-            "pull-to-pull scatter or model discrepancy; both are in the bands"
+            Diagnostic(
+                "misfit_levels",
+                f"{MISFIT} the traces' own levels by more than their noise "
+                f"explains (chi2 = {chi2:.1f} on {dof} degrees of freedom, p = "
+                f"{p_value:.2g}): pull-to-pull scatter or model discrepancy; both are in "
+                "the bands",
+                chi2=chi2,
+                dof=dof,
+                p_value=p_value,
+            )
         )
     disc = sds.get("discrepancy_fr")
     if disc is not None and disc[1] > MISSPECIFIED_SD:
         warnings.append(
-            f"{MISFIT} the operating points by {100 * disc[0]:.0f}% in "
-            f"friction ratio (discrepancy sd, 95% interval {100 * disc[1]:.0f}-"
-            f"{100 * disc[2]:.0f}%): the bands carry it, but Kt and the coupling "
-            "parameters are read through the coupling law's shape (Lambda = Kt a / (mu N)) "
-            "and their intervals assume it is right; under another load dependence of the "
-            "coupling Kt came out 0.13-0.42x its truth on simulated benches, outside its "
-            "interval. Try --coupling auto, and treat Kt as depending on the coupling law"
+            Diagnostic(
+                "misfit_operating_points",
+                f"{MISFIT} the operating points by {100 * disc[0]:.0f}% in "
+                f"friction ratio (discrepancy sd, 95% interval {100 * disc[1]:.0f}-"
+                f"{100 * disc[2]:.0f}%): the bands carry it, but Kt and the coupling "
+                "parameters are read through the coupling law's shape (Lambda = Kt a / "
+                "(mu N)) and their intervals assume it is right; under another load "
+                "dependence of the coupling Kt came out 0.13-0.42x its truth on simulated "
+                "benches, outside its interval. Try --coupling auto, and treat Kt as "
+                "depending on the coupling law",
+                discrepancy_sd=disc,
+            )
         )
     # What the design lets the levels model measure: facts of the data, not doubts about
     # the fit (a short ON window is the bench's design, the OFF level still counts).
@@ -332,7 +345,9 @@ def with_variability(result: FitResult) -> FitResult:
             f"scatter and discrepancy not estimated: the traces' own levels ({why}); "
             "the intervals are the noise-only model's and may be too narrow"
         )
-        return dataclasses.replace(result, warnings=[*result.warnings, note])
+        return dataclasses.replace(
+            result, warnings=[*result.warnings, Diagnostic("levels_not_estimated", note)]
+        )
     z = result.z.copy()
     z[:k] = v.theta
     cov = result.cov_z.copy()

@@ -36,6 +36,8 @@ import warnings
 
 import numpy as np
 
+from idtool._diagnostic import Diagnostic
+
 __all__ = [
     "RULE",
     "STOP_REASONS",
@@ -95,6 +97,31 @@ class Diagnostics:
     @property
     def kept(self) -> int:
         return self.steps - self.burn
+
+    def records(self) -> list[Diagnostic]:
+        """The chain's verdict as diagnostics: ``not_converged`` when the rule is not met."""
+        if self.converged:
+            return []
+        stop = STOP_REASONS.get(self.stopped_by, "")
+        message = (
+            f"the posterior chain did NOT converge ({self.steps} steps"
+            + (f", stopped: {stop}" if stop else "")
+            + f"; about {self.steps_needed} more needed): "
+            + "; ".join(self.messages)
+        )
+        return [
+            Diagnostic(
+                "not_converged",
+                message,
+                steps=self.steps,
+                steps_needed=self.steps_needed,
+                stopped_by=self.stopped_by,
+                slowest=self.slowest,
+                tau=float(np.max(self.tau)),
+                rhat_max=float(np.max(self.rhat)),
+                ess_bulk_min=float(np.min(self.ess_bulk)),
+            )
+        ]
 
     @property
     def slowest(self) -> str:

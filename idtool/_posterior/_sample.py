@@ -246,7 +246,7 @@ def sample_posterior(
         k = fit.model.n_physical
         theta, cov = levels_start(fit.z[:k], fit.cov_z[:k, :k], sds, levels_target)
         z_lin, mode_s = np.asarray(fit.z), 0.0
-        fn = LogPosterior(levels_target, _batch(walkers))
+        fn = LogPosterior(levels_target, _batch(walkers, noise))
         p0 = initial_walkers(theta, cov, fn, walkers, np.random.default_rng(seed))
         initial: Any = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
     elif done == 0:
@@ -254,16 +254,18 @@ def sample_posterior(
         start = find_start(fit, rebuild(np.asarray(fit.z)), rebuild)
         mode_s = time.perf_counter() - started
         z_lin, warnings = start.z_lin, start.warnings
-        fn = LogPosterior(start.target, _batch(walkers))
+        fn = LogPosterior(start.target, _batch(walkers, noise))
         p0 = initial_walkers(start.theta, start.cov, fn, walkers, np.random.default_rng(seed))
         initial = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
     else:
         assert chain_file is not None
         z_lin = read_linearisation(chain_file)
         if noise == LEVELS:
-            fn = LogPosterior(build_levels_target(fit.model, fit.levels[0], table), _batch(walkers))
+            fn = LogPosterior(
+                build_levels_target(fit.model, fit.levels[0], table), _batch(walkers, noise)
+            )
         else:
-            fn = LogPosterior(build_target(fit.model, z_lin, noise, table), _batch(walkers))
+            fn = LogPosterior(build_target(fit.model, z_lin, noise, table), _batch(walkers, noise))
         initial = last_state(chain_file)
         mode_s = 0.0
     settings = _settings(fit, params, table, noise, walkers, seed) | {"warnings": list(warnings)}
@@ -273,7 +275,7 @@ def sample_posterior(
     try:
         diag, sample_s = run_chain(
             lambda backend: emcee.EnsembleSampler(
-                walkers, ndim, fn, vectorize=True, backend=backend, moves=_moves()
+                walkers, ndim, fn, vectorize=True, backend=backend, moves=_moves(noise)
             ),
             initial,
             store,
@@ -322,14 +324,27 @@ def sample_posterior(
     )
 
 
-def _batch(walkers: int) -> int:
-    """Rows of the compiled log-posterior: a quarter of the ensemble (rounded up), the
-    snooker move's subsets; the DE move's halves run as two batches (the cost is linear in
-    the rows, so a padded batch would be time lost)."""
-    return -(-walkers // 4)
+def _batch(walkers: int, noise: str) -> int:
+    """Rows of the compiled log-posterior. The levels model's: a quarter of the ensemble
+    (rounded up), the snooker move's subsets; the DE move's halves run as two batches (its
+    cost is linear in the rows, 1.0, 2.0 and 3.8 ms for 8, 16 and 32: a padded batch would
+    be time lost). The traces' own (noise-only) posterior: half the ensemble, DE's halves."""
+    return -(-walkers // 4) if noise == LEVELS else -(-walkers // 2)
 
 
-def _moves():
+def _moves(noise: str = LEVELS):
+    """The levels model's moves (:func:`_levels_moves`); on the traces' own (noise-only)
+    posterior DE alone, measured better there: largest tau 27 against 48 with the snooker
+    on the example (32 x 3000, benchmarks/bench_sample.py), whose 8 parameters (the
+    actuator's slopes and the noise's sd and phi among them) are near-Gaussian."""
+    import emcee
+
+    if noise == LEVELS:
+        return _levels_moves()
+    return [(emcee.moves.DEMove(), 1.0)]
+
+
+def _levels_moves():
     """emcee's differential-evolution move (ter Braak 2006) and its snooker variant (ter
     Braak & Vrugt 2008), half and half, chosen by measured autocorrelation times on levels
     posteriors (32 walkers x 4000 steps, seed 0): the example and the departure benches

@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from idtool._diagnostic import Diagnostic
 from idtool._errors import IdtoolError
 from idtool._model._noise import whiten
 from idtool._posterior._likelihood import (
@@ -170,9 +171,14 @@ def find_start(fit: Any, target: Target, rebuild: Callable[[np.ndarray], Target]
             for i, p in enumerate(params[: fit.model.n_physical])
         )
         warnings.append(
-            f"the fit stopped in a local optimum: from its {best_label} the log-posterior "
-            f"rises {best_lp - fit_lp:.1f} higher ({names}); the walkers start there. "
-            "Redo the fit (other --seed or more --starts) before trusting fit.json"
+            Diagnostic(
+                "sampler_start",
+                f"the fit stopped in a local optimum: from its {best_label} the "
+                f"log-posterior rises {best_lp - fit_lp:.1f} higher ({names}); the walkers "
+                "start there. Redo the fit (other --seed or more --starts) before trusting "
+                "fit.json",
+                log_posterior_rise=float(best_lp - fit_lp),
+            )
         )
     noise = zip(params[k:], noise_sd, best_theta[k:], strict=True)
     sd_z = [s / p.slope(c) for p, s, c in noise]

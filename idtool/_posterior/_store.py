@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from idtool._atomic import atomic_file
+from idtool._diagnostic import records
 from idtool._errors import IdtoolError
 from idtool._posterior._diagnostics import import_arviz
 from idtool._posterior._groups import thinned_steps
@@ -87,6 +88,7 @@ def inference_data(
         "law": post.law,
         "coupling": post.coupling,
         "diagnostics": post.diagnostics.to_dict(),
+        "diagnostic_records": records([*post.warnings, *post.diagnostics.records()]),
         "timing": post.timing,
         "idtool_version": __version__,
         "thinning": {

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from idtool._diagnostic import Diagnostic
 from idtool._fit._store import StoredFit
 from idtool._posterior._store import POSTERIOR_FILE, load_posterior
 from idtool._predict._predict import (
@@ -110,9 +111,14 @@ def law_disagreement_notes(rows: Sequence[Prediction], weights: Mapping[str, flo
         for _, p, medians in hits[:3]
     )
     return [
-        f"the coupling laws disagree at {len(hits)} of {len(rows)} points by half the band "
-        f"or more ({where}): the data do not tell the laws apart there, and the band "
-        "includes their spread; pulls there would decide"
+        Diagnostic(
+            "coupling_laws",
+            f"the coupling laws disagree at {len(hits)} of {len(rows)} points by half the "
+            f"band or more ({where}): the data do not tell the laws apart there, and the band "
+            "includes their spread; pulls there would decide",
+            points=len(hits),
+            of=len(rows),
+        )
     ]
 
 

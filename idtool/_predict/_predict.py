@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from idtool._data._blocks import FitData
+from idtool._diagnostic import Diagnostic
 from idtool._fit._discrepancy import Conditioning, discrepancy_moments, operating_coordinates
 from idtool._model._benchmodel import BenchModel
 from idtool._posterior._posterior import Posterior
@@ -240,7 +241,7 @@ def draws_from_covariance(
 
 def extrapolation_notes(data: FitData, loads_n=(), amplitudes=(), speeds_m_s=()) -> list[str]:
     """One note per quantity whose requested values leave the range the fit saw."""
-    notes = []
+    notes: list[str] = []
     for label, given, seen in (
         ("normal load", loads_n, data.normal_load_n),
         ("amplitude fraction", amplitudes, data.amplitude_fraction),
@@ -251,7 +252,13 @@ def extrapolation_notes(data: FitData, loads_n=(), amplitudes=(), speeds_m_s=())
         if out:
             vals = ", ".join(out)
             notes.append(
-                f"{label} {vals} lies outside the fitted range [{lo:g}, {hi:g}]: extrapolation"
+                Diagnostic(
+                    "extrapolation",
+                    f"{label} {vals} lies outside the fitted range [{lo:g}, {hi:g}]: extrapolation",
+                    quantity=label,
+                    values=[float(v) for v in given if v < lo * (1 - 1e-9) or v > hi * (1 + 1e-9)],
+                    range=(lo, hi),
+                )
             )
     return notes
 

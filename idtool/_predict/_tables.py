@@ -14,6 +14,7 @@ from typing import Any, Generic, TypeVar
 import numpy as np
 
 from idtool._data._blocks import FitData
+from idtool._diagnostic import reworded
 from idtool._errors import IdtoolError
 from idtool._predict._amplitude import AmplitudeFor, amplitude_for_reduction
 from idtool._predict._mixture import law_disagreement_notes
@@ -136,7 +137,11 @@ def amplitude_table(
     needed = [a.amplitude[0] for a in rows if a.reachable]
     notes = extrapolation_notes(data, loads, (), speeds)
     notes += [
-        n.replace("amplitude fraction", "needed amplitude fraction")
+        reworded(
+            n,
+            n.replace("amplitude fraction", "needed amplitude fraction"),
+            quantity="needed amplitude fraction",
+        )
         for n in extrapolation_notes(data, (), needed, ())
     ]
     return Amplitudes(tuple(rows), draws.source, draws.note, tuple(notes))

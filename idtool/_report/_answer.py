@@ -22,6 +22,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from idtool._diagnostic import reworded
 from idtool._fit._store import StoredFit
 from idtool._predict._amplitude import AmplitudeFor
 from idtool._predict._predict import Draws
@@ -147,7 +148,12 @@ def answer(
     for target in targets:
         amp_rows = amplitude_table(draws, data, target, amp_loads, speeds)
         named = (
-            n.replace("needed amplitude fraction", f"amplitude fraction for {target:g}% reduction,")
+            reworded(
+                n,
+                n.replace(
+                    "needed amplitude fraction", f"amplitude fraction for {target:g}% reduction,"
+                ),
+            )
             for n in amp_rows.warnings
         )
         notes += [n for n in named if n not in notes]

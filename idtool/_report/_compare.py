@@ -22,10 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from idtool._atomic import atomic_output_dir
+from idtool._diagnostic import BANNER_CODES, banner_label, reworded, with_code
 from idtool._entry import load_fit
 from idtool._errors import IdtoolError
-from idtool._fit._plateau_drift import DRIFT
-from idtool._fit._variability import MISFIT
 from idtool._posterior._store import POSTERIOR_FILE
 from idtool._predict._amplitude import AmplitudeFor
 from idtool._predict._compare import (
@@ -356,15 +355,16 @@ def _compare_one(
         amp_rows += rows.rows
         # its load and speed notes are the operating points' (above) again
         amp_notes += [
-            f"{label}, {target:g}% reduction: {n}"
-            for n in rows.warnings
-            if n.startswith("needed amplitude")
+            reworded(n, f"{label}, {target:g}% reduction: {n}")
+            for n in with_code(rows.warnings, "extrapolation")
+            if n.values.get("quantity") == "needed amplitude fraction"
         ]
     # Banners for what undermines the answer table (a compared point outside the tested
     # range); a needed amplitude beyond it is marked in its own cell, and warned below.
     banners = [n.removesuffix(": extrapolation") + ": extrapolated" for n in notes]
-    banners += [f"{label}: model misfit: {w}" for w in fit.warnings if w.startswith(MISFIT)]
-    banners += [f"{label}: level drift: {w}" for w in fit.warnings if w.startswith(DRIFT)]
+    banners += [
+        f"{label}: {banner_label(w).lower()}: {w}" for w in with_code(fit.warnings, *BANNER_CODES)
+    ]
     warnings = []
     if draws.source != "posterior":
         warnings.append(f"{label}: {draws.note}")

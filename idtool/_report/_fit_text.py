@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from idtool._diagnostic import records
 from idtool._fit._derived import derived_estimates
 from idtool._fit._plateau_drift import MIN_RELATIVE_CHANGE, P_ALARM
 from idtool._fit._program import prediction_at
@@ -146,6 +147,9 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
         ],
         "warnings": r.warnings,
         "notes": r.notes,
+        # every doubt and note as a record (code, severity, message, values), which the
+        # report and compare read by code: idtool._diagnostic
+        "diagnostic_records": [*records(r.warnings), *records(r.notes, severity="note")],
         "lm_steps": r.lm_steps,
         "jacobian_evaluations": r.jacobian_evaluations,
         # the fitted traces: all of the dataset's, or those --traces selected

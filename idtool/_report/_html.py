@@ -18,10 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from idtool._atomic import atomic_output_dir, write_text_atomic
+from idtool._diagnostic import BANNER_CODES, banner_label, from_records, with_code
 from idtool._errors import IdtoolError
-from idtool._fit._plateau_drift import DRIFT
 from idtool._fit._store import load_stored_fit
-from idtool._fit._variability import MISFIT
 from idtool._posterior._diagnostics import STOP_REASONS
 from idtool._posterior._store import POSTERIOR_FILE
 from idtool._predict._mixture import prediction_draws
@@ -101,7 +100,12 @@ def _banners(doc: dict, meta: dict | None, extrapolation: Sequence[str] = ()) ->
     model that misses the data by more than their noise explains, and answers that
     extrapolate beyond the tested loads or amplitudes."""
     out = []
-    if meta is not None and not meta["diagnostics"].get("converged", True):
+    chain = [] if meta is None else from_records(meta.get("diagnostic_records", []))
+    unconverged = with_code(chain, "not_converged") or (  # posterior.nc before the records
+        meta is not None and not meta["diagnostics"].get("converged", True)
+    )
+    if unconverged:
+        assert meta is not None
         diag = meta["diagnostics"]
         stop = STOP_REASONS.get(diag.get("stopped_by", ""), "")
         out.append(
@@ -111,9 +115,12 @@ def _banners(doc: dict, meta: dict | None, extrapolation: Sequence[str] = ()) ->
             "bands and plots below are not to be trusted yet. Continue it with idtool sample "
             "FIT --resume, then report again."
         )
-    out += [f"Model misfit: {w}" for w in doc["warnings"] if w.startswith(MISFIT)]
-    out += [f"Level drift: {w}" for w in doc["warnings"] if w.startswith(DRIFT)]
-    out += [f"Extrapolated answer: {n.removesuffix(': extrapolation')}" for n in extrapolation]
+    fit_records = from_records(doc.get("diagnostic_records", []))
+    out += [f"{banner_label(w)}: {w}" for w in with_code(fit_records, *BANNER_CODES)]
+    out += [
+        f"Extrapolated answer: {n.removesuffix(': extrapolation')}"
+        for n in with_code(extrapolation, "extrapolation")
+    ]
     return "".join(f'<p class="banner">{html.escape(b)}</p>' for b in out)
 
 

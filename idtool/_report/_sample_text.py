@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from idtool._atomic import write_text_atomic
+from idtool._diagnostic import records
 from idtool._fit._result import Estimate
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._posterior._groups import model_check_groups
@@ -146,6 +147,8 @@ def write_posterior_outputs(
         "posterior_predictive": check.to_dict(),
         "nuisances": nuisances,
         "warnings": list(post.warnings),
+        # every doubt as a record (code, severity, message, values): idtool._diagnostic
+        "diagnostic_records": records([*post.warnings, *post.diagnostics.records()]),
         "timing_s": post.timing,
         "seed": post.seed,
         "idtool_version": __version__,
