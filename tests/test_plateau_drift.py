@@ -16,7 +16,7 @@ from test_departures import small_params
 
 import idtool
 from idtool import simulate_bench
-from idtool._diagnostic import with_code
+from idtool._diagnostic import CODES, with_code
 from idtool._fit._plateau_drift import (
     DRIFT,
     EDGE_S,
@@ -26,6 +26,7 @@ from idtool._fit._plateau_drift import (
     pooled_drift,
     slope_and_se,
 )
+from idtool._simulate._departures import departure_params
 from idtool._simulate._plateau_drift import on_level_over_time_n
 
 SEED = 5
@@ -202,3 +203,16 @@ def test_no_warning_without_a_plateau_drift(edits):
     assert drift_warnings(fit) == []
     for pooled in fit.result.plateau_drift.values():
         assert getattr(pooled, "n_plateaus", 1) > 0 and pooled.p_value > P_ALARM
+
+
+def test_a_fading_horn_that_breaks_the_levels_model_still_predicts():
+    """The 'fading' departure preset at seed 701 (paper matrix, ON level up 23% within a
+    second): the levels' likelihood is not finite there; the fit falls back to the
+    noise-only bands with a warning (it crashed in its predictions' sd draws) and still
+    says the horn fades."""
+    dataset, _ = simulate_bench(departure_params("fading", 701), seed=701)
+    fit = idtool.fit(dataset, seed=0)
+    codes = {w.code for w in with_code(fit.warnings, *CODES)}
+    assert {"levels_not_estimated", "drift_on"} <= codes and fit.levels is None
+    (p,) = fit.predict(450.0, 0.6)
+    assert 0.0 < p.ci95[0] < p.median < p.ci95[1] <= 1.0 + 1e-12  # FR <= 1, to round-off

@@ -224,6 +224,10 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
         raise np.linalg.LinAlgError("they do not inform every physical parameter")
     nll, _ = at_sds(tau2, r, g, args)
     nll0, step0 = at_sds(np.zeros(3), r, g, args)
+    if not (np.isfinite(nll) and np.isfinite(nll0)):
+        # a fit whose levels' covariance is not positive definite (on a fading-horn bench
+        # the grid's likelihood was NaN everywhere and the predictions' sd draws failed)
+        raise np.linalg.LinAlgError("their likelihood is not finite")
     n = r.size
     const = 0.5 * n * math.log(2 * math.pi)
 
@@ -246,6 +250,10 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
             t2 = np.tile(tau2, (GRID, 1))
             t2[:, j] = grid**2
             nl = np.asarray(evaluate(t2, r, g, *args, True)[0])
+            # a grid point whose covariance is not positive definite has no likelihood
+            nl = np.where(np.isfinite(nl), nl, np.inf)
+            if not np.isfinite(nl.min()):
+                raise np.linalg.LinAlgError(f"their likelihood is not finite along {p.name}")
             if nl[-1] - nl.min() > math.log(1e3):
                 break
             top *= 2.0

@@ -219,7 +219,13 @@ def validate(
     zv = np.asarray(out.z)
     pred = np.asarray(held.predict(jnp.asarray(zv)))
     d = held.data
-    free = free_levels(held, zv, phi)
+    try:
+        free = free_levels(held, zv, phi)
+    except np.linalg.LinAlgError as err:
+        raise IdtoolError(
+            f"{dataset.name}: the held-out traces' own levels cannot be read ({err}); "
+            "are they from the same bench and model?"
+        ) from None
     points = [
         (float(d.normal_load_n[i]), float(d.amplitude_fraction[i]), float(d.pull_speed_m_s[i]))
         for i in range(d.n_traces)
