@@ -49,7 +49,7 @@ __all__ = [
 ]
 
 TAU_FACTOR = 50  # chain length needed, in autocorrelation times
-TAU_CHANGE_MAX = 0.02  # relative change of tau between the chain's first 90% and all of it
+TAU_CHANGE_MAX = 0.02  # change of the longest tau over the chain's last 10%, relative to it
 TAU_EARLIER = 0.9  # the earlier estimate: on this fraction of the chain
 RHAT_MAX = 1.01
 ESS_MIN = 400.0  # bulk ESS, each parameter

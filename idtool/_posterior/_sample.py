@@ -3,8 +3,8 @@
 * The log-posterior of :mod:`idtool._posterior._likelihood`, batched over walkers (the contact
   model vmapped, the bench model with walkers as its fastest axis), is compiled once and
   handed to ``emcee.EnsembleSampler(vectorize=True)``; emcee evaluates half the ensemble
-  (DE move) or a quarter (snooker move) at a time, in batches of a quarter, so every call
-  has the same shape (one compilation).
+  (DE move) or a quarter (snooker move) at a time, in batches of a fixed size
+  (:func:`_batch`), so every call has the same shape (one compilation).
 * Without a fixed number of steps it samples until the chain has converged
   (:mod:`idtool._posterior._runner`).
 * Walkers start from a multivariate normal around the fit's optimum with the fit's
@@ -234,7 +234,7 @@ def sample_posterior(
         )
     if steps is not None and steps < 10:
         raise IdtoolError(f"steps {steps}: give at least 10")
-    if max_steps < FIRST_CHECK:
+    if steps is None and max_steps < FIRST_CHECK:
         raise IdtoolError(f"max_steps {max_steps}: give at least {FIRST_CHECK}")
     if not max_minutes > 0:
         raise IdtoolError(f"max_minutes {max_minutes:g}: give a positive number")
