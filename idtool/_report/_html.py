@@ -124,6 +124,19 @@ def _banners(doc: dict, meta: dict | None, extrapolation: Sequence[str] = ()) ->
     return "".join(f'<p class="banner">{html.escape(b)}</p>' for b in out)
 
 
+def _convergence(diag: dict) -> str:
+    """The chain's verdict, the rule and what stopped the run, then one row per parameter
+    (tau, its change, ESS, bulk ESS, R-hat): ``sample.json``'s ``diagnostics``."""
+    head = {k: v for k, v in diag.items() if k != "parameters"}
+    formats = {"tau": ".1f", "tau_change": ".1%", "ess": ".0f", "ess_bulk": ".0f", "rhat": ".3f"}
+    rows = [
+        [name, *(format(p[k], f) if k in p else "-" for k, f in formats.items())]
+        for name, p in diag.get("parameters", {}).items()
+    ]
+    header = ["parameter", "tau [steps]", "tau change (last 10%)", "ESS", "bulk ESS", "R-hat"]
+    return kv_table(head) + table(header, rows)
+
+
 def _unasked_note(extrapolation: Sequence[str]) -> str:
     """The default targets' extrapolations, under the answer's tables (not a banner: the
     report chose those targets, nobody asked them of the data)."""
@@ -321,7 +334,7 @@ def write_report(
             units |= {n: str(post[n].attrs.get("units", "")) for n in sampled}
             wpath = walker_figure(chains, sampled, units, figs / "walkers.png")
             diag = meta["diagnostics"]
-            sec["Sampling: walkers and convergence"] = kv_table(diag) + img(wpath, "walkers")
+            sec["Sampling: walkers and convergence"] = _convergence(diag) + img(wpath, "walkers")
             md += ["", f"Sampling converged: {diag.get('converged')}"]
         else:
             sec["Sampling: walkers and convergence"] = "<p>No posterior: run idtool sample.</p>"
