@@ -152,7 +152,7 @@ def test_short_on_windows_that_never_reach_the_on_level():
     # interval ([1.4e8, 7.3e8] here, missing the truth) is far too narrow, the
     # likelihood check sees it and reports the profile interval instead.
     checked = with_code(run.chosen.warnings, "profile_interval")
-    assert [w.values["parameter"] for w in checked] == ["Kt"]
+    assert "Kt" in [w.values["parameter"] for w in checked]
 
 
 def test_a_spurious_multistart_basin_does_not_win():
