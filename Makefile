@@ -29,9 +29,9 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_sample.py
 	$(BIN)/python benchmarks/bench_first_result.py
 
-# The defaults on every departure kind of the simulator, 3 seeds each (~15 min on 2
-# cores): run it before closing an issue that touches the fit, the likelihood or the
-# sampler, and quote its table (benchmarks/study_departures.py).
+# The defaults on every departure kind of the simulator, 3 seeds each (8 min on 2 cores,
+# plus up to 10 per fading-horn bench): run it before closing an issue that touches the
+# fit, the likelihood or the sampler, and quote its table (benchmarks/study_departures.py).
 study: $(STAMP)
 	$(BIN)/python benchmarks/study_departures.py --seeds 3
 
