@@ -281,28 +281,38 @@ def import_daq(
             sniffed unless ``sep``/``decimal`` are given; ``sep`` may be ``"tab"`` or
             ``"whitespace"``) or Parquet files. Trace ids are the file names without suffix.
         out: dataset folder to create (replaced only with ``force=True``).
-        name, material, description: the dataset's; ``extensions``: its ``x_*`` fields.
-        vibration_frequency_hz, max_amplitude_m, mains_frequency_hz: the rig [Hz, m, Hz].
-        time_column, force_column: header (matched case-insensitively, with or without
-            its unit) or 1-based number of the time and force columns.
+        name: the dataset's name.
+        material: the dataset's materials (free text).
+        description: the dataset's description (optional).
+        extensions: the dataset's ``x_*`` fields.
+        vibration_frequency_hz: the rig's horn frequency [Hz].
+        max_amplitude_m: the rig's horn amplitude at 100% command [m].
+        mains_frequency_hz: the rig's mains frequency [Hz] (optional).
+        time_column: header (matched case-insensitively, with or without its unit) or
+            1-based number of the time column.
+        force_column: the same for the force column.
         trigger_column: a trigger channel [V]: ON above ``threshold_v`` (default midway
             between its two levels) plus half of ``hysteresis_v`` (default 20% of the
             swing), OFF below it minus half; ON or OFF pulses shorter than
             ``debounce_s`` [s] are ignored; ``active_low``: ON while low; more than
             ``max_on_windows`` ON windows in a trace is an error.
         on_column: instead of a trigger, a 0/1 (true/false, on/off) column.
-        time_unit, force_unit, trigger_unit: units where the header gives none (a header
-            unit must agree); without either, s, N and V.
+        time_unit: the time column's unit where its header gives none (a header unit
+            must agree); without either, s.
+        force_unit: the same for the force column; without either, N.
+        trigger_unit: the same for the trigger channel; without either, V.
         conditions: a table (CSV or Parquet) with a ``file`` column and ``load``,
             ``amplitude``, ``speed`` (and optional ``notes``) columns.
         pattern: a regular expression searched in each file name without suffix, with
             named groups ``load_n``, ``load_kn``, ``amplitude_percent``,
             ``amplitude_fraction``, ``speed_m_s``, ``speed_mm_s`` (or ``load``,
             ``amplitude``, ``speed`` in ``load_unit``, ``amplitude_unit``, ``speed_unit``).
-        normal_load_n, amplitude_fraction, pull_speed_m_s: one value for every file [N,
-            -, m/s]. Each file must get each quantity from exactly one source.
-        skip_rows: lines above the header to skip; ``encoding``: of CSV files (default
-            UTF-8 with or without a byte-order mark).
+        normal_load_n: one normal load for every file [N]. Each file must get each
+            quantity (load, amplitude, speed) from exactly one source.
+        amplitude_fraction: one commanded amplitude for every file [-].
+        pull_speed_m_s: one pull speed for every file [m/s].
+        skip_rows: lines above the header to skip.
+        encoding: of CSV files (default UTF-8 with or without a byte-order mark).
         trace_format: ``"parquet"`` or ``"csv"``, the written trace tables.
         force: replace an existing ``out``.
 
