@@ -1,15 +1,16 @@
 # The two commands (see README):  make demo   and   make test
 # Both create .venv/ at the repo root from the pinned constraints when it is missing.
+# make docs builds the documentation site into site/ (warnings are errors).
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test lint bench study clean-venv
+.PHONY: demo test lint docs bench study clean-venv
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
-	PIP_CONSTRAINT=$(CURDIR)/constraints.txt $(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[dev]'
+	PIP_CONSTRAINT=$(CURDIR)/constraints.txt $(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[dev,docs]'
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -22,6 +23,12 @@ lint: $(STAMP)
 
 test: lint
 	MPLBACKEND=Agg $(BIN)/python -m pytest -n 2 --dist loadfile --durations=30
+
+# The site from docs/ and the docstrings (mkdocs.yml); --strict: any warning (a broken
+# link, a docstring mkdocstrings cannot parse, an example importing idtool._*) fails it.
+# Offline: nothing is fetched at build time. A few seconds.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_curve.py
