@@ -8,7 +8,8 @@
   beside it, so its links work and the schemas can be downloaded from the site. The
   format stays written once, where the package installs it.
 * ``CONTRIBUTING.md`` and ``CHANGELOG.md`` become the pages ``contributing.md`` and
-  ``changelog.md``, their links into ``docs/`` made relative to the site.
+  ``changelog.md``, their links into ``docs/`` (and to the format's README) made
+  relative to the site.
 * Every page's code blocks are checked for imports of private modules (``idtool._*``):
   examples use the public API only. A hit is a warning, so ``mkdocs build --strict``
   fails.
@@ -65,6 +66,7 @@ def on_files(files: Files, config) -> Files:
     files.append(File.generated(config, "dataset-format.md", content=SCHEMA_README.read_text()))
     for name, page in PROJECT_PAGES.items():
         text = (ROOT / name).read_text().replace("](docs/", "](")
+        text = text.replace("](datasets_schema/README.md", "](dataset-format.md")
         files.append(File.generated(config, page, content=text))
     for schema in sorted(SCHEMA_README.parent.glob("*.schema.json")):
         files.append(File.generated(config, schema.name, abs_src_path=str(schema)))
