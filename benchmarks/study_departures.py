@@ -64,6 +64,7 @@ def score(kind: str, seed: int) -> dict:
         out[f"fit_{name}"] = est.ci95[0] <= value <= est.ci95[1]
         out[f"fit_{name}_err"] = est.estimate / value - 1.0
         out[f"fit_{name}_decades"] = float(np.log10(est.ci95[1] / est.ci95[0]))
+        out[f"fit_{name}_one_sided"] = bool(est.one_sided)  # "> lo" or "< hi"
     out["drift_warning"] = any(w.startswith(DRIFT) for w in fit.warnings)
     out["misfit_warning"] = any(w.startswith(MISFIT) for w in fit.warnings)
 
@@ -97,7 +98,7 @@ def table(rows: list[dict]) -> None:
     head = (
         f"{'kind':9}{'conv':>6}{'steps':>7}{'s':>6}{'tau':>6} {'slowest':15}"
         f"{'FR fit':>8}{'FR post':>8}{'Kt fit':>7}{'Kt post':>8}{'mu fit':>7}{'mu post':>8}"
-        f"{'Kt err':>8}{'mu err':>8}{'Kt dec':>7}{'hw':>7}{'drift':>6}{'misfit':>7}"
+        f"{'Kt err':>8}{'mu err':>8}{'Kt dec':>7}{'Kt 1s':>6}{'hw':>7}{'drift':>6}{'misfit':>7}"
     )
     print(head)
     totals: dict[str, list] = {}
@@ -119,6 +120,7 @@ def table(rows: list[dict]) -> None:
             f"{np.mean([abs(r['post_Kt_err']) for r in rs]):8.1%}"
             f"{np.mean([abs(r['post_mu_err']) for r in rs]):8.2%}"
             f"{max(max(r['fit_Kt_decades'], r['post_Kt_decades']) for r in rs):7.2f}"
+            f"{sum(r.get('fit_Kt_one_sided', False) for r in rs):>4}/{n}"
             f"{np.mean([r['half_width'] for r in rs]):7.4f}"
             f"{sum(r['drift_warning'] for r in rs):>4}/{n}"
             f"{sum(r['misfit_warning'] for r in rs):>5}/{n}"
@@ -127,17 +129,17 @@ def table(rows: list[dict]) -> None:
 
 
 def main() -> None:
-    from idtool._simulate._departures import DEPARTURE_KINDS, DRIFT_KINDS
+    from idtool._simulate._departures import DEPARTURE_KINDS, DRIFT_KINDS, SHAPE_KINDS
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=3, help="seeds per kind (default 3)")
-    parser.add_argument("--kinds", default=",".join(DEPARTURE_KINDS + DRIFT_KINDS))
+    parser.add_argument("--kinds", default=",".join(DEPARTURE_KINDS + DRIFT_KINDS + SHAPE_KINDS))
     parser.add_argument("--rows", default="study_rows.jsonl", help="JSON lines, one per dataset")
     args = parser.parse_args()
     started = time.perf_counter()
     rows = []
     kinds = args.kinds.split(",")
-    every = DEPARTURE_KINDS + DRIFT_KINDS
+    every = DEPARTURE_KINDS + DRIFT_KINDS + SHAPE_KINDS  # the later kinds appended
     for kind in kinds:
         k = every.index(kind)  # the kind's seeds whatever else runs
         for s in range(1, args.seeds + 1):

@@ -58,6 +58,7 @@ _LAZY = {
     "COUPLINGS": "idtool._model._coupling",
     "ConstantCoupling": "idtool._model._coupling",
     "ExponentialCoupling": "idtool._model._coupling",
+    "LoadPowerCoupling": "idtool._model._coupling",
     "PowerLimitedCoupling": "idtool._model._coupling",
     "SdofCoupling": "idtool._model._coupling",
     "sdof_detuning_n_m": "idtool._model._coupling_sdof",
@@ -133,6 +134,7 @@ __all__ = [
     "Fit",
     "IdtoolError",
     "LagActuator",
+    "LoadPowerCoupling",
     "LuGre",
     "Param",
     "ParameterSetting",
@@ -211,6 +213,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
         AbstractCoupling,
         ConstantCoupling,
         ExponentialCoupling,
+        LoadPowerCoupling,
         PowerLimitedCoupling,
         SdofCoupling,
     )

@@ -13,6 +13,7 @@ from idtool._errors import IdtoolError
 from idtool._fit._parameter_table import parse_fix, read_parameter_table
 from idtool._fit._run import fit_dataset
 from idtool._fit._store import load_stored_fit
+from idtool._model._names import DEFAULT_COUPLING
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._settings import ParameterSetting
 from idtool._predict._validation import select_traces
@@ -25,7 +26,7 @@ def fit(
     dataset: Dataset | str | os.PathLike,
     *,
     law: str = "dahl",
-    coupling: str = "power-limited",
+    coupling: str = DEFAULT_COUPLING,
     noise: str = DEFAULT_NOISE,
     seed: int = 0,
     starts: int = 8,
@@ -47,7 +48,7 @@ def fit(
         dataset: a :class:`~idtool.Dataset` or the path of a v1 dataset folder.
         law: friction law, a name of :data:`idtool.FRICTION_LAWS` ("dahl", "lugre").
         coupling: a name of :data:`idtool.COUPLINGS`, or "auto" (fit every coupling
-            law, keep the lowest BIC).
+            law, keep the lowest BIC). Default "power-limited", the paper's finding.
         noise: a name of :data:`idtool.NOISE_MODELS` (default "ar1").
         seed: seeds the multi-start points; the same seed gives the same fit.
         starts: multi-start points.

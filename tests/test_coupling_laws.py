@@ -220,7 +220,9 @@ def test_predictions_average_the_laws_and_cover_what_one_law_misses(comparable):
         if chosen.model.coupling.name != "exponential":
             assert not alone.ci95[0] <= truth <= alone.ci95[1], (load, truth, alone.ci95)
         laws = dict(averaged[0].by_law)
-        assert set(laws) == {"exponential", "power-limited"}
+        # every law the average keeps (the load-power law nests the power limit and
+        # pays BIC's ln(n) for its one more parameter: its weight is small, not nil)
+        assert set(laws) == set(kept) >= {"exponential", "power-limited"}
         assert with_code(averaged.warnings, "coupling_laws")
         assert averaged.to_dict()["rows"][0]["by_coupling_law"] == laws
     tested = fit.predict(450.0, 0.5)
@@ -233,10 +235,13 @@ def test_a_saved_fit_keeps_the_laws_it_averages(comparable):
     doc = json.loads((folder / "fit.json").read_text())
     files = {w["law"]: w.get("state_file") for w in doc["coupling_laws"]}
     chosen = fit.model.coupling.name
-    other = ({"exponential", "power-limited"} - {chosen}).pop()
+    kept = {w["law"] for w in doc["coupling_laws"] if w["bic_weight"] >= 1e-3}
+    others = kept - {chosen}
+    assert {"exponential", "power-limited"} - {chosen} <= others
     assert files[chosen] is None and files["constant"] is None  # chosen: fit_state.npz
-    assert (folder / files[other]).is_file()
+    for other in others:
+        assert (folder / files[other]).is_file()
     back = idtool.load_fit(folder)
-    assert set(back._state.alternates) == {other}
+    assert set(back._state.alternates) == others
     a, b = fit.predict(60.0, 0.5)[0], back.predict(60.0, 0.5)[0]
     assert (a.median, a.ci95, a.by_law) == (b.median, b.ci95, b.by_law)

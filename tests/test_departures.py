@@ -22,7 +22,13 @@ from idtool._errors import IdtoolError
 from idtool._model._bench import dahl_at_load, on_friction_ratio
 from idtool._model._contact import prescribed_cycle_average
 from idtool._model._coupling import COUPLINGS
-from idtool._simulate._departures import DEPARTURE_KINDS, DRIFT_KINDS, departure_params
+from idtool._simulate._departures import (
+    ALL_KINDS,
+    DEPARTURE_KINDS,
+    DRIFT_KINDS,
+    SHAPE_KINDS,
+    departure_params,
+)
 from idtool._simulate._lag import lag_actuator_force_n
 from idtool._simulate._simulate import (
     TRUTH_FILE,
@@ -444,7 +450,7 @@ def test_negative_sd_is_refused_naming_the_field(tmp_path, capsys, section, fiel
     assert f"{section}.{field}" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("kind", DEPARTURE_KINDS + DRIFT_KINDS)
+@pytest.mark.parametrize("kind", DEPARTURE_KINDS + DRIFT_KINDS + SHAPE_KINDS)
 def test_presets_round_trip_and_keep_the_paper_matrix(kind):
     params = departure_params(kind, 5)
     document = params.to_dict()
@@ -453,7 +459,7 @@ def test_presets_round_trip_and_keep_the_paper_matrix(kind):
     assert e.normal_loads_n == (270.0, 450.0, 670.0) and e.amplitude_fractions == (0.5, 0.7)
     assert min(e.on_durations_s) >= 0.5 and max(e.on_durations_s) <= 2.5
     assert len(experiment_plan(params)) == 24  # as many traces as the example
-    on = set(DEPARTURE_KINDS) if kind == "all" else {kind}  # "all": not the drift kinds
+    on = set(ALL_KINDS) if kind == "all" else {kind}  # "all": not the drift kinds
     assert ("scatter" in document) == ("scatter" in on)
     assert (params.horn_fading.fade_fraction == 0.2) == ("fading" in on)
     assert (params.contact.level_creep_per_s == 0.002) == ("creep" in on)
@@ -464,7 +470,10 @@ def test_presets_round_trip_and_keep_the_paper_matrix(kind):
     assert (params.load_cell.mains_frequency_hz == 60.0) == ("mains60" in on)
     assert (e.sample_rate_hz == 2000.0) == ("mains60" in on)
     assert (params.load_cell.offset_drift_sd_n_s > 0) == ("drift" in on)
-    assert params.coupling.in_fit == ("coupling" not in on)
+    assert params.coupling.in_fit == ("coupling" not in on and "ceiling" not in on)
+    assert params.coupling.law == {"coupling": "load_exponential", "ceiling": "tanh_ceiling"}.get(
+        next(iter(on & {"coupling", "ceiling"}), ""), "power_limited"
+    )
 
 
 def test_presets_draw_one_truth_per_seed():

@@ -155,7 +155,7 @@ def test_help_validate_and_import_do_not_load_jax(tmp_path):
     fit_help = subprocess.run(
         [sys.executable, "-m", "idtool._cli._main", "fit", "--help"], capture_output=True, text=True
     ).stdout
-    assert "coupling law: constant, exponential, power-limited, sdof, auto" in " ".join(
+    assert "coupling law: constant, exponential, load-power, power-limited, sdof, auto" in " ".join(
         fit_help.split()
     )
     bad = subprocess.run(

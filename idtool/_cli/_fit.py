@@ -9,6 +9,7 @@ from pathlib import Path
 
 from idtool._atomic import refuse_existing
 from idtool._cli._args import add_law_argument, load_numerics, registry_names
+from idtool._model._names import DEFAULT_COUPLING
 
 __all__ = ["register"]
 
@@ -81,8 +82,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--coupling",
         choices=registry_names("COUPLINGS", "auto"),
         metavar="LAW",
-        default="power-limited",
-        help="coupling law: %(choices)s (default power-limited, the paper's finding); "
+        default=DEFAULT_COUPLING,
+        help=f"coupling law: %(choices)s (default {DEFAULT_COUPLING}, the paper's finding); "
         "auto fits every coupling law and keeps the lowest BIC",
     )
     p.add_argument(

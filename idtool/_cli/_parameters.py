@@ -7,7 +7,7 @@ from pathlib import Path
 
 from idtool._atomic import refuse_existing, write_text_atomic
 from idtool._cli._args import add_law_argument, registry_names
-from idtool._model._names import DEFAULT_ACTUATOR
+from idtool._model._names import DEFAULT_ACTUATOR, DEFAULT_COUPLING
 
 __all__ = ["register"]
 
@@ -46,8 +46,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--coupling",
         choices=registry_names("COUPLINGS"),
         metavar="LAW",
-        default="power-limited",
-        help="coupling law: %(choices)s (default power-limited)",
+        default=DEFAULT_COUPLING,
+        help=f"coupling law: %(choices)s (default {DEFAULT_COUPLING})",
     )
     p.add_argument(
         "--actuator",

@@ -19,7 +19,7 @@ import numpy as np
 
 from idtool._diagnostic import Diagnostic
 from idtool._fit._program import run_lm
-from idtool._fit._result import Z95, Z_AT_BOUND, FitResult
+from idtool._fit._result import Z95, Z_AT_BOUND, FitResult, one_sided
 
 __all__ = [
     "Profile",
@@ -31,6 +31,8 @@ __all__ = [
 
 _CHI2_95 = 3.84  # -2 log L rise at the ends of a 95% interval, one parameter
 _TOO_FLAT = 1.0  # a rise below this at an end means the interval is far too narrow
+# halvings of the last step of a profile walk: the end to 1/64 of that step
+_BISECTIONS = 6
 
 
 def refit_with_fixed(
@@ -49,20 +51,33 @@ def refit_with_fixed(
     return (2.0 * float(out.loss) - result.rss) / sigma2, np.asarray(out.z)
 
 
-def _profile_end(result: FitResult, i: int, side: float, se: float) -> float:
+def _profile_end(
+    result: FitResult, i: int, side: float, se: float, z_from: float | None = None
+) -> float:
     """Internal-scale point on ``side`` (+1 or -1) where the profile rise reaches 3.84
-    (linear interpolation), walking outward in doubling steps; the bound if never."""
-    z_prev, d_prev, z_warm = float(result.z[i]), 0.0, None
+    (linear interpolation), walking from ``z_from`` (default: the optimum) in doubling
+    steps; the bound it walks towards if never (the last step stops at the bound)."""
+    z0 = float(result.z[i]) if z_from is None else z_from
+    z_prev, d_prev, warm = z0, 0.0, None  # warm: the refit at z_prev, to start from
     step = se
-    while True:
-        z_next = float(result.z[i]) + side * step
-        if abs(z_next) > Z_AT_BOUND:
-            return side * Z_AT_BOUND
-        d_next, z_warm = refit_with_fixed(result, i, z_next, z_warm)
+    while side * z_prev < Z_AT_BOUND:
+        z_next = min(side * (z0 + side * step), Z_AT_BOUND) * side
+        d_next, warm_next = refit_with_fixed(result, i, z_next, warm)
         if d_next >= _CHI2_95:
+            # the rise can grow by decades within one doubled step (0.6 to 4500 on a
+            # saturation's load scale): halve the bracket before interpolating, each
+            # refit from the inner side's solution
+            for _ in range(_BISECTIONS):
+                z_mid = 0.5 * (z_prev + z_next)
+                d_mid, warm_mid = refit_with_fixed(result, i, z_mid, warm)
+                if d_mid >= _CHI2_95:
+                    z_next, d_next = z_mid, d_mid
+                else:
+                    z_prev, d_prev, warm = z_mid, d_mid, warm_mid
             return float(np.interp(_CHI2_95, [d_prev, d_next], [z_prev, z_next]))
-        z_prev, d_prev = z_next, max(d_next, d_prev)
+        z_prev, d_prev, warm = z_next, max(d_next, d_prev), warm_next
         step *= 2.0
+    return side * Z_AT_BOUND
 
 
 def check_intervals(result: FitResult) -> FitResult:
@@ -78,18 +93,24 @@ def check_intervals(result: FitResult) -> FitResult:
         if not spec.bounded or not se > 0.0:
             continue
         est = estimates[name]
-        ends = []
+        if est.at_bound:
+            estimates[name] = _from_the_bound(result, i, est)
+            continue
+        ends, z_ends = [], []
         for side, value in ((-1.0, est.ci95[0]), (1.0, est.ci95[1])):
             zi = float(result.z[i]) + side * Z95 * se
             rise = refit_with_fixed(result, i, zi)[0] if abs(zi) < Z_AT_BOUND else _CHI2_95
             if rise < _TOO_FLAT:
-                z_end = _profile_end(result, i, side, se)
-                value = float(spec.value(float(z_end)))
+                zi = _profile_end(result, i, side, se)
+                value = float(spec.value(float(zi)))
             ends.append((value, rise))
+            z_ends.append(zi)
         if all(rise >= _TOO_FLAT for _, rise in ends):
             continue
         (lo, rise_lo), (hi, rise_hi) = ends
-        estimates[name] = dataclasses.replace(est, ci95=(lo, hi))
+        # a profile that reaches the parameter's bound leaves that side open
+        open_side = one_sided(z_ends[0], z_ends[1])
+        estimates[name] = dataclasses.replace(est, ci95=(lo, hi), one_sided=open_side)
         warnings.append(
             Diagnostic(
                 "profile_interval",
@@ -104,6 +125,24 @@ def check_intervals(result: FitResult) -> FitResult:
             )
         )
     return dataclasses.replace(result, estimates=estimates, warnings=warnings)
+
+
+def _from_the_bound(result: FitResult, i: int, est):
+    """A parameter at a bound of its range (the data push it there): its Gauss-Newton
+    interval is meaningless (the transform is flat there), and the data bound it on the
+    other side only. That end is where the profile, walking inward from the bound in
+    doubling steps of 0.25 on the internal scale, rises by 3.84; the estimate is then
+    stated one-sided (``Kt < 2e6 N/m``), or over its whole range if it never rises."""
+    spec = result.model.params[i]
+    inward = -1.0 if result.z[i] > 0.0 else 1.0
+    # from the edge of the bound (beyond it the transform is flat: the same model)
+    z_end = _profile_end(result, i, inward, 0.25, z_from=-inward * Z_AT_BOUND)
+    end = float(spec.value(z_end))
+    bound = spec.hi if inward < 0.0 else spec.lo
+    lo, hi = sorted((float(bound), end))
+    reached = abs(z_end) < Z_AT_BOUND
+    side = ("upper" if inward > 0.0 else "lower") if reached else ""
+    return dataclasses.replace(est, ci95=(lo, hi), one_sided=side)
 
 
 @dataclasses.dataclass(frozen=True)

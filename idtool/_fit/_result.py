@@ -17,7 +17,7 @@ from idtool._model._params import Param
 if TYPE_CHECKING:
     from idtool._fit._variability import Variability
 
-__all__ = ["Z95", "Z_AT_BOUND", "Estimate", "FitResult", "estimate_of"]
+__all__ = ["Z95", "Z_AT_BOUND", "Estimate", "FitResult", "estimate_of", "one_sided"]
 
 Z95 = 1.959963984540054
 # Internal scale: a bounded parameter beyond this sits at its bound (sigmoid > 0.999).
@@ -36,6 +36,22 @@ class Estimate:
     at_bound: bool = False
     fixed: bool = False  # fixed (--fix, a parameter table, the rig): not estimated
     fixed_label: str = ""  # who fixed it, for reports ("fixed by the user", ...)
+    # "lower" when the data bound it from below only (its interval runs to the top of
+    # its range: reported as "> ci95[0]"), "upper" from above only ("< ci95[1]"),
+    # "" when they bound it on both sides (or on neither: the interval is its range)
+    one_sided: str = ""
+
+    @property
+    def statement(self) -> str:
+        """The interval as a reader should take it: ``[lo, hi]``, or ``> lo`` / ``< hi``
+        where the data bound the parameter on one side only (the other end is the
+        parameter's range, not information)."""
+        lo, hi = self.ci95
+        if self.one_sided == "lower":
+            return f"> {lo:.4g} (95%; not bounded above)"
+        if self.one_sided == "upper":
+            return f"< {hi:.4g} (95%; not bounded below)"
+        return f"[{lo:.5g}, {hi:.5g}]"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -111,9 +127,22 @@ def estimate_of(spec: Param, z: float, se_z: float) -> Estimate:
     value = float(spec.value(float(z)))
     se = abs(float(spec.slope(z))) * float(se_z)
     if spec.bounded:
-        lo = float(spec.value(float(z - Z95 * se_z)))
-        hi = float(spec.value(float(z + Z95 * se_z)))
+        z_lo, z_hi = float(z - Z95 * se_z), float(z + Z95 * se_z)
+        lo, hi = float(spec.value(z_lo)), float(spec.value(z_hi))
         at_bound = abs(z) > Z_AT_BOUND
+        side = one_sided(z_lo, z_hi)
     else:
-        lo, hi, at_bound = value - Z95 * se, value + Z95 * se, False
-    return Estimate(spec.name, spec.unit, value, se, (lo, hi), at_bound)
+        lo, hi, at_bound, side = value - Z95 * se, value + Z95 * se, False, ""
+    return Estimate(spec.name, spec.unit, value, se, (lo, hi), at_bound, one_sided=side)
+
+
+def one_sided(z_lo: float, z_hi: float) -> str:
+    """Which side alone the data bound, from the interval's ends on the internal scale:
+    an end at or beyond :data:`Z_AT_BOUND` is the parameter's range, not an end the data
+    set (:attr:`Estimate.one_sided`)."""
+    open_lo, open_hi = z_lo <= -Z_AT_BOUND, z_hi >= Z_AT_BOUND
+    if open_hi and not open_lo:
+        return "lower"
+    if open_lo and not open_hi:
+        return "upper"
+    return ""

@@ -46,6 +46,7 @@ from idtool._model._actuator import ACTUATORS
 from idtool._model._benchmodel import bench_model, shared_params_of
 from idtool._model._coupling import COUPLINGS
 from idtool._model._laws import FRICTION_LAWS
+from idtool._model._names import DEFAULT_COUPLING
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._offset import OFFSETS
 from idtool._model._params import Param
@@ -145,7 +146,7 @@ def coupling_weights(candidates: dict[str, FitResult]) -> dict[str, LawWeight]:
 def fit_dataset(
     dataset: Dataset,
     law: str = "dahl",
-    coupling: str = "power-limited",
+    coupling: str = DEFAULT_COUPLING,
     seed: int = 0,
     n_starts: int = 8,
     compare_laws: bool = False,
@@ -290,6 +291,9 @@ def fit_dataset(
                     bic_weights={w.law: w.bic_weight for w in (chosen, *rivals)},
                 )
             )
+        best = candidates[best_key] = dataclasses.replace(
+            best, notes=[*best.notes, kt_through_coupling(best.model.coupling.name)]
+        )
         if run_warnings:  # for the fit report
             best = candidates[best_key] = dataclasses.replace(
                 best, warnings=[*best.warnings, *run_warnings]
@@ -311,6 +315,26 @@ def fit_dataset(
             for name in best.model.physical_names:
                 profiles[name] = profile_parameter(best, name)
         return FitRun(data, best, candidates, reason, seed, profiles, alternates)
+
+
+def kt_through_coupling(law: str) -> str:
+    """What Kt's interval rests on (a fact of the experiment, for every fit's notes).
+
+    The friction ratio depends on the velocity ratio ``VR = v / (a w)`` and on
+    ``Lambda = Kt a / (mu N)`` alone (notes §4), and the slip amplitude ``a`` is not
+    measured: along any one measured FR, ``a`` can run from its Coulomb limit
+    (``Lambda -> inf``) to its creep limit (``Lambda -> 0``) with Kt from infinity to 0.
+    Only the coupling law's shape across loads and amplitudes ties them, so a law that
+    fits the levels equally well can put Kt elsewhere (3x off on simulated benches
+    whose coupling saturates under a ceiling of another shape, with no misfit seen).
+    """
+    return (
+        f"Kt is read through the {law} coupling law: the slip amplitude is not "
+        "measured, and the friction ratio depends on Kt only through Lambda = Kt a / "
+        "(mu N), so Kt's interval holds if the law's dependence on load and amplitude "
+        "is right. A vibrometer reading of the slip amplitude at each load would pin Kt "
+        "without it"
+    )
 
 
 def _compile_lm(data: FitData, names: tuple[str, str, str, str], noise: str, settings) -> None:

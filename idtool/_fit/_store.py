@@ -99,6 +99,7 @@ class StoredFit:
                 bool(e.get("at_bound", False)),
                 bool(e.get("fixed", False)),
                 str(e.get("fixed_by", "fixed by the user" if e.get("fixed") else "")),
+                str(e.get("one_sided", "")),
             )
             for name, e in entries.items()
         }

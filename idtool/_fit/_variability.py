@@ -287,10 +287,10 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
                 f"friction ratio (discrepancy sd, 95% interval {100 * disc[1]:.0f}-"
                 f"{100 * disc[2]:.0f}%): the bands carry it, but Kt and the coupling "
                 "parameters are read through the coupling law's shape (Lambda = Kt a / "
-                "(mu N)) and their intervals assume it is right; under another load "
-                "dependence of the coupling Kt came out 0.13-0.42x its truth on simulated "
-                "benches, outside its interval. Try --coupling auto, and treat Kt as "
-                "depending on the coupling law",
+                "(mu N)) and their intervals assume it is right; on simulated benches "
+                "whose coupling had another shape Kt came out 0.13-0.42x its truth under "
+                "the power limit, outside its interval. Compare the laws (--coupling "
+                "auto), and treat Kt as depending on the coupling law",
                 discrepancy_sd=disc,
             )
         )

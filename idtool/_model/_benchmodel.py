@@ -44,6 +44,7 @@ from idtool._model._actuator import ACTUATORS, DEFAULT_ACTUATOR, AbstractActuato
 from idtool._model._bench import TraceTiming, on_friction_ratio
 from idtool._model._coupling import COUPLINGS, AbstractCoupling
 from idtool._model._laws import FRICTION_LAWS, MU, AbstractFrictionLaw
+from idtool._model._names import DEFAULT_COUPLING
 from idtool._model._noise import DEFAULT_NOISE, NOISE_MODELS, AbstractNoise, whiten
 from idtool._model._offset import DEFAULT_OFFSET, OFFSETS, AbstractOffset
 from idtool._model._params import Param
@@ -335,7 +336,7 @@ def _add_trailing(per_trace: ArrayLike, shift: ArrayLike, extra: int) -> Array:
 def bench_model(
     data: FitData,
     law: str | type[AbstractFrictionLaw] = "dahl",
-    coupling: str | type[AbstractCoupling] = "power-limited",
+    coupling: str | type[AbstractCoupling] = DEFAULT_COUPLING,
     noise: str | type[AbstractNoise] = DEFAULT_NOISE,
     actuator: str | type[AbstractActuator] = DEFAULT_ACTUATOR,
     offset: str | type[AbstractOffset] = DEFAULT_OFFSET,

@@ -47,6 +47,7 @@ __all__ = [
     "AbstractCoupling",
     "ConstantCoupling",
     "ExponentialCoupling",
+    "LoadPowerCoupling",
     "PowerLimitedCoupling",
     "SdofCoupling",
     "load_scale_param",
@@ -181,5 +182,6 @@ def load_scale_param(name: str, description: str, hi: float = 1e5) -> Param:
 # (the constant law first: the simplest). Imported last: each imports the interface.
 from idtool._model._coupling_constant import ConstantCoupling  # noqa: E402
 from idtool._model._coupling_exponential import ExponentialCoupling  # noqa: E402
+from idtool._model._coupling_load_power import LoadPowerCoupling  # noqa: E402
 from idtool._model._coupling_power_limited import PowerLimitedCoupling  # noqa: E402
 from idtool._model._coupling_sdof import SdofCoupling  # noqa: E402

@@ -14,6 +14,8 @@ Kt [N/m]               log-uniform [1e4, 1e13]        scale parameter, unknown t
 mu                     log-uniform [1e-3, 3]          any dry friction coefficient
 coupling_gain          log-uniform [1e-5, 1]          a gain of at most 1 (no amplification)
 power_load_n [N]       log-uniform [1, 1e5]           from no power limit to an extreme one
+load_exponent          uniform [-2, 4]                load-power: coupling ~ N^-beta, from rising
+                                                      with the load to falling steeply
 drive_force_max_n [N]  log-uniform [1e-3, 1e7]        sdof: the drive, unknown to decades
 loss_stiffness_n_m     log-uniform [1e3, 1e14] N/m    sdof: Q from ~1 to ~1e7 for any stack
 detuning_n_m (sdof)    uniform [-1e11, 1e11] N/m      when estimated (usually fixed)

@@ -29,6 +29,8 @@ def _est(e: Estimate) -> dict:
         "unit": e.unit,
         "at_bound": bool(e.at_bound),
     }
+    if e.one_sided:  # the data bound it on this side only ("lower": report "> lo")
+        out["one_sided"] = e.one_sided
     return out | {"fixed": True, "fixed_by": e.fixed_label} if e.fixed else out
 
 
@@ -226,10 +228,7 @@ def _fmt(e: Estimate) -> str:
         return f"{e.estimate:12.5g} {e.unit:4s} {e.fixed_label or 'fixed'} (not estimated)"
     rel = f"({100 * e.std_error / abs(e.estimate):.2g}%)" if e.estimate else ""
     flag = "  AT BOUND" if e.at_bound else ""
-    return (
-        f"{e.estimate:12.5g} {e.unit:4s} +/- {e.std_error:9.3g} {rel:9s} "
-        f"[{e.ci95[0]:.5g}, {e.ci95[1]:.5g}]{flag}"
-    )
+    return f"{e.estimate:12.5g} {e.unit:4s} +/- {e.std_error:9.3g} {rel:9s} {e.statement}{flag}"
 
 
 def fit_report(run: FitRun) -> str:

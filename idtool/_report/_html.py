@@ -276,7 +276,12 @@ def write_report(
         for n in [*names, *fixed]:
             p = doc["parameters"][n]
             row = [n, meaning.get(n, ""), p["unit"], g(p["estimate"])]
-            row += [f"[{g(p['ci95'][0])}, {g(p['ci95'][1])}]"]
+            ci = f"[{g(p['ci95'][0])}, {g(p['ci95'][1])}]"
+            if p.get("one_sided") == "lower":  # the data bound it from below only
+                ci = f"> {g(p['ci95'][0])} (not bounded above)"
+            elif p.get("one_sided") == "upper":
+                ci = f"< {g(p['ci95'][1])} (not bounded below)"
+            row += [ci]
             if n in fixed:
                 row[-1:] = [p.get("fixed_by", "fixed by the user"), "-", "fixed (not sampled)"]
             elif post is not None and n in post:

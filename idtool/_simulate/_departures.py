@@ -12,13 +12,17 @@ moderate, realistic size:
 * ``"mains60"``: 60 Hz hum sampled at 2000 Hz;
 * ``"drift"``: a linear load-cell offset drift, rate sd 0.05 N/s (about 0.6 N over a trace);
 * ``"coupling"``: the truth-only coupling ``a = gain alpha A_max exp(-N / load_scale_n)``;
+* ``"ceiling"``: the truth-only coupling ``a = gain A_max c tanh(alpha / c)``, its ceiling
+  ``c = sqrt(ceiling_load_n / N)`` falling as ``N^-1/2`` through a tanh knee (another
+  saturating shape than any the fit ships; :mod:`idtool._simulate._truth_coupling`);
 * ``"fading"``: a horn whose slip amplitude fades by up to 20% within each ON window
   (time constant 1.5 s: 16% lost by the end of a 2.5 s window, so the ON level rises
   through it; :mod:`idtool._simulate._plateau_drift`);
 * ``"creep"``: mu creeping by 0.2% of itself per second of sliding (1.5-2% over a trace,
   2-3 N at 670 N: eight times the offset drift's newtons per second at 450 N);
 * ``"all"``: scatter, actuator, mains60, drift and coupling together (a paper-like bench:
-  the paper's lab is on 60 Hz mains). Not the fading horn nor the creeping level: the
+  the paper's lab is on 60 Hz mains). Not the ceiling coupling (a bench has one coupling
+  law), nor the fading horn nor the creeping level: the
   coverage studies run "all" as a bench the fit's model should still cover, and those two
   move the levels within their plateaus, which no model option of the fit represents
   (the fit warns of them instead, :mod:`idtool._fit._plateau_drift`).
@@ -43,7 +47,7 @@ from idtool._data._example import example_params_path
 from idtool._errors import IdtoolError
 from idtool._simulate._params import BenchParams
 
-__all__ = ["ALL_KINDS", "DEPARTURE_KINDS", "DRIFT_KINDS", "departure_params"]
+__all__ = ["ALL_KINDS", "DEPARTURE_KINDS", "DRIFT_KINDS", "SHAPE_KINDS", "departure_params"]
 
 # The departures the fit's model options cover (the coverage studies score these).
 DEPARTURE_KINDS = ("clean", "scatter", "actuator", "mains60", "drift", "coupling", "all")
@@ -53,6 +57,12 @@ DEPARTURE_KINDS = ("clean", "scatter", "actuator", "mains60", "drift", "coupling
 DRIFT_KINDS = ("fading", "creep")
 # What "all" turns on (module docstring).
 ALL_KINDS = frozenset(DEPARTURE_KINDS) - {"clean", "all"}
+# A coupling whose shape no shipped law has and which the fit's checks do not see: the
+# power limit and the load-power law both fit its levels (the latter to within their
+# noise) with Kt 0.3-8x off its truth, outside the interval, since Kt is read through the
+# coupling's shape (idtool._fit._run.kt_through_coupling). Measured in the study (make
+# study), not asserted by the coverage tests: no model option represents it yet.
+SHAPE_KINDS = ("ceiling",)
 
 # Pull-to-pull scatter: log-normal sd of the per-trace FR and mu multipliers [-].
 SCATTER = {"friction_ratio_sd": 0.03, "friction_coefficient_sd": 0.007}
@@ -71,6 +81,10 @@ LEVEL_CREEP_PER_S = 0.002  # [1/s]: mu rises 0.2% of itself per second of slidin
 # amplitude at 270 and 670 N for 50% amplitude (so FR about 0.15 and 0.41 there, the
 # paper's reductions), but without the power limit (70% now gives clearly more reduction).
 TRUTH_ONLY_COUPLING = {"law": "load_exponential", "gain": 0.032, "load_scale_n": 600.0}
+# The truth-only saturating coupling, calibrated to the example's power-limited one at
+# 450 N (slip amplitudes 0.63 and 0.65 um at 50 and 70%, against 0.62 and 0.66): 11%
+# less at 270 N and 19% more at 670 N, where its ceiling falls more slowly with the load.
+CEILING_COUPLING = {"law": "tanh_ceiling", "gain": 0.03, "ceiling_load_n": 30.0}
 
 # Half-widths of the seeded truth's log-uniform ranges around the example's values: mu
 # 0.27-0.33, Kt 0.67e9-1.5e9 N/m, gain +-10%, load scales +-20%. Narrow enough that Lambda
@@ -86,8 +100,8 @@ _TRUTH_STREAM = 0x7472757468  # "truth"
 
 
 def departure_params(kind: str, seed: int) -> BenchParams:
-    """Simulator parameters with the departure ``kind`` (one of :data:`DEPARTURE_KINDS` or
-    :data:`DRIFT_KINDS`).
+    """Simulator parameters with the departure ``kind`` (one of :data:`DEPARTURE_KINDS`,
+    :data:`DRIFT_KINDS` or :data:`SHAPE_KINDS`).
 
     ``seed`` (an integer >= 0) draws the true mu, Kt, coupling gain and load scale
     (module docstring); simulate with ``idtool.simulate_bench(params, seed)``.
@@ -95,8 +109,8 @@ def departure_params(kind: str, seed: int) -> BenchParams:
     Raises:
         IdtoolError: an unknown ``kind`` or a bad ``seed``.
     """
-    if kind not in DEPARTURE_KINDS + DRIFT_KINDS:
-        kinds = ", ".join(DEPARTURE_KINDS + DRIFT_KINDS)
+    if kind not in DEPARTURE_KINDS + DRIFT_KINDS + SHAPE_KINDS:
+        kinds = ", ".join(DEPARTURE_KINDS + DRIFT_KINDS + SHAPE_KINDS)
         raise IdtoolError(f"departure kind {kind!r}: use one of {kinds}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise IdtoolError(f"seed {seed!r}: give an integer >= 0")
@@ -108,6 +122,9 @@ def departure_params(kind: str, seed: int) -> BenchParams:
     if "coupling" in on:
         p["coupling"] = dict(TRUTH_ONLY_COUPLING)
         p["coupling"]["load_scale_n"] *= truth["load_scale"]
+    elif kind == "ceiling":
+        p["coupling"] = dict(CEILING_COUPLING)
+        p["coupling"]["ceiling_load_n"] *= truth["load_scale"]
     else:
         p["coupling"]["power_load_n"] *= truth["load_scale"]
     p["coupling"]["gain"] *= truth["gain"]

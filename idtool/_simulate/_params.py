@@ -59,8 +59,9 @@ class CouplingParams:
     """Horn amplitude -> slip amplitude.
 
     ``law`` is 'constant', 'power_limited' (load scale ``power_load_n`` P [N]),
-    'exponential' (load scale ``saturation_load_n`` P [N]) or the truth-only
-    'load_exponential' (load scale ``load_scale_n`` [N]; see
+    'load_power' (also ``load_exponent`` beta [-]), 'exponential' (load scale
+    ``saturation_load_n`` P [N]) or the truth-only 'load_exponential' (load scale
+    ``load_scale_n`` [N]) and 'tanh_ceiling' (``ceiling_load_n`` [N]; see
     :mod:`idtool._simulate._truth_coupling`), or 'sdof', the transducer loaded by the
     contact (``drive_force_max_n`` [N], ``loss_stiffness_n_m`` [N/m], ``detuning_n_m``
     [N/m], default 0; see :mod:`idtool._model._coupling_sdof`), which has no ``gain``.
@@ -69,7 +70,9 @@ class CouplingParams:
     law: str
     gain: float | None = None
     power_load_n: float | None = None
+    load_exponent: float | None = None
     load_scale_n: float | None = None
+    ceiling_load_n: float | None = None
     saturation_load_n: float | None = None
     drive_force_max_n: float | None = None
     loss_stiffness_n_m: float | None = None
@@ -88,7 +91,9 @@ class CouplingParams:
         values: dict[str, Any] = {
             "coupling_gain": self.gain,
             "power_load_n": self.power_load_n,
+            "load_exponent": self.load_exponent,
             "load_scale_n": self.load_scale_n,
+            "ceiling_load_n": self.ceiling_load_n,
             "saturation_load_n": self.saturation_load_n,
             "drive_force_max_n": self.drive_force_max_n,
             "loss_stiffness_n_m": self.loss_stiffness_n_m,

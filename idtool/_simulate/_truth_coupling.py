@@ -11,6 +11,12 @@ amplitude saturation):
   The slip amplitude stays proportional to the commanded amplitude at every load (no
   saturation in ``alpha``), and falls exponentially with the normal load instead of as
   ``1 / (alpha N)`` at large ``alpha N`` like the power limit.
+* :class:`TanhCeilingCoupling`: ``a = gain * A_max * c * tanh(alpha / c)`` with the ceiling
+  ``c = sqrt(ceiling_load_n / N)``. The constant law at small ``alpha``; a ceiling
+  ``gain * A_max * c`` that falls as ``N^-1/2`` (the shipped saturating laws' falls as
+  ``1 / N``, the load-power law's small-signal gain as ``N^-beta`` times that), reached
+  through a tanh knee, sharper than the power limit's algebraic and the exponential
+  law's soft one.
 """
 
 from __future__ import annotations
@@ -23,7 +29,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from idtool._model._coupling import AbstractCoupling
 
-__all__ = ["TRUTH_ONLY_COUPLINGS", "LoadExponentialCoupling"]
+__all__ = ["TRUTH_ONLY_COUPLINGS", "LoadExponentialCoupling", "TanhCeilingCoupling"]
 
 
 class LoadExponentialCoupling(AbstractCoupling):
@@ -53,7 +59,36 @@ class LoadExponentialCoupling(AbstractCoupling):
         return jnp.asarray(self.gain * alpha * max_amplitude_m * decay)
 
 
+class TanhCeilingCoupling(AbstractCoupling):
+    """Truth only: ``a = gain * A_max * c * tanh(alpha / c)``, ``c = sqrt(L / N)`` [m].
+
+    Attributes:
+        gain: slip amplitude per commanded horn amplitude at small amplitude [-].
+        ceiling_load_n: load scale L [N]: at the load L the ceiling is the full command.
+    """
+
+    gain: Float[ArrayLike, ""]
+    ceiling_load_n: Float[ArrayLike, ""]
+    name: ClassVar[str] = "tanh_ceiling"
+
+    @classmethod
+    def from_values(cls, values: Mapping[str, ArrayLike]) -> TanhCeilingCoupling:
+        return cls(gain=values["coupling_gain"], ceiling_load_n=values["ceiling_load_n"])
+
+    def amplitude_m(
+        self,
+        amplitude_fraction: Float[ArrayLike, "*b"],
+        normal_load_n: Float[ArrayLike, "*b"],
+        max_amplitude_m: Float[ArrayLike, ""],
+    ) -> Float[Array, "*b"]:
+        alpha = jnp.asarray(amplitude_fraction)
+        # the ceiling as a commanded fraction; a zero load (no contact) has none
+        c = jnp.sqrt(jnp.asarray(self.ceiling_load_n) / jnp.maximum(normal_load_n, 1e-9))
+        return jnp.asarray(self.gain * max_amplitude_m * c * jnp.tanh(alpha / c))
+
+
 # The simulator parameter file's name of each truth-only law (``coupling.law``).
 TRUTH_ONLY_COUPLINGS: dict[str, type[AbstractCoupling]] = {
     "load_exponential": LoadExponentialCoupling,
+    "tanh_ceiling": TanhCeilingCoupling,
 }
