@@ -35,6 +35,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_fit.py
 	$(BIN)/python benchmarks/bench_sample.py
 	$(BIN)/python benchmarks/bench_first_result.py
+	$(BIN)/python benchmarks/bench_read.py
 
 # The defaults on every departure kind of the simulator, 3 seeds each (8 min on 2 cores,
 # plus up to 10 per fading-horn bench): run it before closing an issue that touches the

@@ -11,6 +11,7 @@ nothing written.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 import subprocess
 import sys
@@ -24,8 +25,10 @@ import pytest
 
 import idtool
 from idtool._cli._main import main
+from idtool._data._import_columns import _NUMBER, _clean_numbers
 from idtool._data._import_trigger import debounce, schmitt, trigger_levels
 from idtool._data._import_units import parse_header, value_in_si
+from idtool._data._table_read import RawColumn
 
 TRACE_IDS = ("N270_A50_T1", "N450_A70_T0.5", "N670_A50_T2")
 RIG = ["--material", "PES webbing", "--horn-hz", "20000", "--max-amplitude-um", "85"]
@@ -756,3 +759,23 @@ def test_help_shows_the_motivating_example_and_import_loads_no_jax(capsys):
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert done.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize("mark", [".", ","])
+def test_a_clean_column_parses_as_its_cells_would(mark):
+    """_clean_numbers reads a column at once only if every cell passes the per-cell
+    check, with its value: over the characters of plain numbers NumPy's parsing accepts
+    exactly what _NUMBER does (every string of up to 5 such characters, alone and beside
+    a good cell)."""
+    for n in range(6):
+        for chars in itertools.product("09+-.eE", repeat=n):
+            cell = "".join(chars)
+            if mark == ",":
+                cell = cell.replace(".", ",")
+            text = cell.replace(",", ".") if mark == "," else cell
+            ok = _NUMBER.fullmatch(text) is not None and np.isfinite(float(text))
+            for cells in ((cell,), ("1", f" {cell}\t")):
+                clean = _clean_numbers(RawColumn(text=cells), mark)
+                assert (clean is not None) == ok, cells
+                if clean is not None:
+                    assert clean[0][-1] == float(text)
