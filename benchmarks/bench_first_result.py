@@ -57,9 +57,10 @@ def on_duration(event, secs, **_):
         jax_events[key] += secs
 
 jax.monitoring.register_event_duration_secs_listener(on_duration)
-from idtool._cli._main import _enable_compilation_cache, build_parser
+from idtool._cli._cache import enable_compilation_cache
+from idtool._cli._main import build_parser
 from idtool._cli import _args
-_enable_compilation_cache()
+enable_compilation_cache()
 build_parser()
 import idtool
 _args.freeze_on_load = True  # as the console script: the fit's modules, imports frozen

@@ -123,7 +123,7 @@ def test_the_compilation_cache_is_locked_between_processes(tmp_path):
     import filelock  # the lock JAX needs for it  # noqa: F401
     from jax._src.lru_cache import LRUCache
 
-    from idtool._cli._main import CACHE_MAX_BYTES, compilation_cache_settings
+    from idtool._cli._cache import CACHE_MAX_BYTES, compilation_cache_settings
 
     settings = compilation_cache_settings(str(tmp_path))
     assert settings["jax_compilation_cache_max_size"] == CACHE_MAX_BYTES > 0

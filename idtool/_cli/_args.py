@@ -73,7 +73,7 @@ def registry_names(registry: str, *extra: str, fittable: bool = False) -> LazyCh
     friction laws with parameters to fit (not Coulomb's)."""
 
     def names() -> tuple[str, ...]:
-        import idtool
+        import idtool  # the registries import JAX: read when argparse needs them
 
         found = getattr(idtool, registry)
         kept = [n for n in found.names() if not fittable or found.get(n).fit_params]

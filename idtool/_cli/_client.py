@@ -30,7 +30,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from idtool._cli._main import compilation_cache_settings
+from idtool._cli._cache import compilation_cache_settings
 
 __all__ = [
     "Lines",
@@ -47,7 +47,7 @@ __all__ = [
 # started under other values would compute differently (or elsewhere) than in-process
 # (not MPLBACKEND: the commands draw on bare Figures, written as PNG whatever it says)
 _STARTUP_ENV = ("JAX_", "XLA_", "TF_CPP_", "IDTOOL_CACHE_DIR", "OMP_")
-# set by every command from IDTOOL_CACHE_DIR (idtool._cli._main._enable_compilation_cache)
+# set by every command from IDTOOL_CACHE_DIR (idtool._cli._cache.enable_compilation_cache)
 _SET_BY_IDTOOL = tuple(name.upper() for name in compilation_cache_settings(""))
 
 

@@ -7,6 +7,7 @@ import json
 import math
 from pathlib import Path
 
+from idtool._atomic import refuse_existing
 from idtool._cli._args import number_list
 from idtool._errors import IdtoolError
 
@@ -20,7 +21,7 @@ def _check(name: str, values: list[float] | None, lo: float, hi: float) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from idtool._atomic import refuse_existing
+    # local: the comparison imports JAX, which the other commands' start-up must not
     from idtool._report._compare import TARGETS, compare_fits, default_out
 
     # Everything that can be refused is refused before the fits are read and compared

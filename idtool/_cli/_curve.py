@@ -55,6 +55,7 @@ def dimensionless_law(
     """
     # The registered law from its fit parameters, at unit load with mu = 1 (Fc = 1).
     values = {"mu": 1.0, "Kt": lam, "static_ratio": fs_ratio, "stribeck_velocity_m_s": stribeck_vr}
+    # local, as in every command: JAX and the figures load only when a command needs them
     import jax.numpy as jnp
 
     from idtool._model._laws import FRICTION_LAWS
@@ -71,6 +72,7 @@ def dimensionless_law(
 
 def friction_curve(law: AbstractFrictionLaw, vr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Friction ratio and power ratio of the dimensionless contact at each VR."""
+    # local, as in every command: JAX and the figures load only when a command needs them
     import jax.numpy as jnp
 
     from idtool._model._contact import cycle_average_curve

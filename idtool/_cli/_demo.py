@@ -11,14 +11,13 @@ import time
 from pathlib import Path
 
 from idtool._atomic import refuse_existing
+from idtool._cli._main import EXIT_NOT_CONVERGED, main
+from idtool._data._example import example_dataset_path
 
 __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
-    from idtool._cli._main import EXIT_NOT_CONVERGED, main
-    from idtool._data._example import example_dataset_path
-
     out = Path(args.out)
     refuse_existing(out, args.force)
     data = str(example_dataset_path())

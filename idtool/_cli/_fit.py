@@ -7,16 +7,16 @@ import sys
 import time
 from pathlib import Path
 
+import idtool
 from idtool._atomic import refuse_existing
 from idtool._cli._args import add_law_argument, load_numerics, registry_names
-from idtool._model._names import BY_DESIGN
+from idtool._model._names import BY_DESIGN, DEFAULT_NOISE
 
 __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
     load_numerics()  # first: the collector then skips what it imports
-    import idtool
 
     started = time.perf_counter()
     refuse_existing(args.out, args.force)  # before minutes of fitting, not after
@@ -55,6 +55,7 @@ def _run(args: argparse.Namespace) -> int:
 
 def _fixed(items: list[str] | None) -> dict[str, float] | None:
     """``--fix NAME=VALUE`` options as a mapping (an unreadable one: located error)."""
+    # local, as in every command: JAX and the figures load only when a command needs them
     from idtool._fit._parameter_table import parse_fix
 
     settings = parse_fix(items or [])
@@ -67,8 +68,6 @@ def _progress(line: str) -> None:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from idtool._model._names import DEFAULT_NOISE
-
     p = sub.add_parser(
         "fit",
         help="fit Kt, mu and the coupling to a dataset",

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from idtool._cli._validate import dataset_summary, summary_table
 from idtool._data._dataset import Dataset
 from idtool._data._import_units import value_in_si
 
@@ -73,8 +74,6 @@ def _extension(text: str) -> tuple[str, str]:
 
 def _summary(dataset: Dataset, files: list[str]) -> dict[str, Any]:
     """``idtool validate --json``'s summary, with the imported files and each trace's notes."""
-    from idtool._cli._validate import dataset_summary
-
     out = dataset_summary(dataset)
     out["imported_from"] = files
     for entry, trace in zip(out["traces"], dataset.traces, strict=True):
@@ -83,7 +82,8 @@ def _summary(dataset: Dataset, files: list[str]) -> dict[str, Any]:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from idtool._cli._validate import summary_table
+    # local: the importer's readers, loaded only by the command that runs them (every
+    # command's module is imported to build the parser)
     from idtool._data._import import import_daq
 
     dataset = import_daq(

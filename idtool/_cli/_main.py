@@ -13,6 +13,9 @@ import io
 import sys
 from collections.abc import Sequence
 
+from idtool._cli import _args
+from idtool._cli._cache import enable_compilation_cache
+from idtool._cli._client import ServerGone, forward
 from idtool._errors import IdtoolError
 from idtool._version import __version__
 
@@ -20,8 +23,6 @@ from idtool._version import __version__
 EXIT_BAD_INPUT = 2  # bad input or refused overwrite: nothing written
 EXIT_NOT_CONVERGED = 3  # sample: outputs written, but the chain did not converge
 EXIT_INTERRUPTED = 130
-
-CACHE_MAX_BYTES = 2 * 1024**3  # the compilation cache's disk use (the demo's: ~100 MB)
 
 EXIT_CODES = (
     f"exit status: 0 done; {EXIT_BAD_INPUT} bad input or an output that exists without "
@@ -73,49 +74,9 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def compilation_cache_settings(path: str) -> dict[str, object]:
-    """JAX's configuration for the on-disk compilation cache in folder ``path``."""
-    return {
-        "jax_compilation_cache_dir": path,
-        # Every program, however small: two dozen of 20-30 ms each were recompiled on
-        # every run below the default threshold (0.6 s of a warm fit).
-        "jax_persistent_cache_min_compile_time_secs": 0.0,
-        # XLA's own autotuning caches put the cache folder's path into the compile
-        # options, so the key of the same program changed with IDTOOL_CACHE_DIR.
-        "jax_persistent_cache_enable_xla_caches": "none",
-        # A size limit (least recently used entries go) is what makes JAX lock the
-        # cache's reads and writes (filelock): without it a second process can read an
-        # entry still being written and crash deserialising it.
-        "jax_compilation_cache_max_size": CACHE_MAX_BYTES,
-    }
-
-
-def _enable_compilation_cache() -> None:
-    """Keep compiled XLA programs on disk so a repeated command skips compilation.
-
-    Compilation is most of the time to a first result of a short command. The cache
-    lives in ``$IDTOOL_CACHE_DIR`` (default ``~/.cache/idtool/jax``); set it to an empty
-    string to disable it. Set through JAX's environment variables, so a command that
-    never computes (``validate``, ``--help``) does not import JAX; the configuration
-    directly where JAX is loaded already (``main`` called from Python).
-    """
-    import os
-
-    path = os.environ.get("IDTOOL_CACHE_DIR", os.path.expanduser("~/.cache/idtool/jax"))
-    if not path:
-        return
-    settings = compilation_cache_settings(path)
-    jax = sys.modules.get("jax")
-    for name, value in settings.items():
-        if jax is not None:
-            jax.config.update(name, value)
-        else:
-            os.environ[name.upper()] = str(value)
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``idtool`` console script; returns the exit status."""
-    _enable_compilation_cache()
+    enable_compilation_cache()
     parser = build_parser()
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)
@@ -143,9 +104,6 @@ def console() -> int:
     """Entry point of the ``idtool`` console script: the command runs in this
     installation's idtool server if one is running and free (``idtool server start``;
     :mod:`idtool._cli._client`), else in this interpreter (:func:`main`)."""
-    from idtool._cli import _args
-    from idtool._cli._client import ServerGone, forward
-
     argv = sys.argv[1:]
     try:
         code = forward(argv)

@@ -13,6 +13,7 @@ __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
+    # local, as in every command: JAX and the figures load only when a command needs them
     from idtool._fit._parameter_table import parameter_template
     from idtool._model._actuator import ACTUATORS
     from idtool._model._benchmodel import shared_params_of

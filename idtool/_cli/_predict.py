@@ -6,6 +6,7 @@ import argparse
 import json
 import math
 
+import idtool
 from idtool._cli._args import number_list
 from idtool._errors import IdtoolError
 
@@ -20,7 +21,6 @@ def _check(name: str, values: list[float], lo: float, hi: float, closed_hi: bool
 
 
 def _run(args: argparse.Namespace) -> int:
-    import idtool
 
     # The options are checked before the fit is read (it takes a second or two).
     if args.amplitude is None and args.target_reduction is None:

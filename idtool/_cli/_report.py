@@ -10,6 +10,7 @@ __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
+    # local, as in every command: JAX and the figures load only when a command needs them
     from idtool._report._html import write_report
 
     path = write_report(args.fit, targets=args.targets, loads_n=args.loads or ())

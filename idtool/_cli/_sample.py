@@ -7,16 +7,18 @@ import sys
 import time
 from pathlib import Path
 
-from idtool._cli._args import load_numerics
+import idtool
+from idtool._cli._args import load_numerics, registry_names
 from idtool._cli._main import EXIT_INTERRUPTED, EXIT_NOT_CONVERGED
 from idtool._errors import IdtoolError
+from idtool._posterior._runner import MAX_MINUTES, MAX_STEPS
 
 __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
     load_numerics()  # first: the collector then skips what it imports
-    import idtool
+    # local, as in every command: JAX and the figures load only when a command needs them
     from idtool._posterior._sample import CHAIN_FILE
     from idtool._report._sample_text import POSTERIOR_FILES
 
@@ -90,9 +92,6 @@ def _positive_int(text: str) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from idtool._cli._args import registry_names
-    from idtool._posterior._runner import MAX_MINUTES, MAX_STEPS
-
     p = sub.add_parser(
         "sample",
         help="sample the posterior of a fit with emcee",

@@ -14,6 +14,7 @@ __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
+    # local, as in every command: JAX and the figures load only when a command needs them
     from idtool._model._seed_study import plot_seed_study, seed_study
 
     started = time.perf_counter()

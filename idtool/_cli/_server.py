@@ -32,6 +32,8 @@ from pathlib import Path
 from typing import Any
 
 from idtool._cli import _client
+from idtool._cli._args import load_numerics
+from idtool._cli._main import build_parser, main
 from idtool._errors import IdtoolError
 
 __all__ = ["register", "serve"]
@@ -49,9 +51,6 @@ def _warm_imports() -> None:
     import matplotlib
 
     matplotlib.use("Agg")  # the server has no display; idtool only writes files
-    from idtool._cli._args import load_numerics
-    from idtool._cli._main import build_parser
-
     load_numerics()  # the fit, its models and JAX (no freeze here: _collect does it)
     build_parser()
 
@@ -200,8 +199,6 @@ class _Server:
 def _run_command(argv: list[str]) -> int:
     """``idtool ARGV`` as the console script runs it; its exit status."""
     import warnings
-
-    from idtool._cli._main import main
 
     try:
         with warnings.catch_warnings():  # a command's filters stay its own

@@ -11,6 +11,7 @@ __all__ = ["register"]
 
 
 def _run(args: argparse.Namespace) -> int:
+    # local, as in every command: JAX and the figures load only when a command needs them
     from idtool._simulate._params import load_bench_params
     from idtool._simulate._simulate import TRUTH_FILE, simulate_bench, write_simulation
 

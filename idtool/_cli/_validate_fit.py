@@ -6,6 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
+import idtool
 from idtool._atomic import refuse_existing, write_text_atomic
 from idtool._cli._args import load_numerics
 
@@ -16,7 +17,6 @@ VALIDATION_FILE = "validation.json"
 
 def _run(args: argparse.Namespace) -> int:
     load_numerics()  # first: the collector then skips what it imports
-    import idtool
 
     out = Path(args.fit) / VALIDATION_FILE
     refuse_existing(out, args.force)
