@@ -7,15 +7,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
+from idtool._fit._level_design import discrepancy_conditioning
+from idtool._fit._variability import Variability
 from idtool._model._benchmodel import BenchModel
 from idtool._model._params import Param
-
-if TYPE_CHECKING:
-    from idtool._fit._variability import Variability
 
 __all__ = ["Z95", "Z_AT_BOUND", "Estimate", "FitResult", "estimate_of", "one_sided"]
 
@@ -98,8 +97,6 @@ class FitResult:
     def conditioning(self):
         """What predictions condition the discrepancy on (the traces' own friction
         ratios, :mod:`idtool._fit._discrepancy`), or None when the levels model is off."""
-        from idtool._fit._level_design import discrepancy_conditioning
-
         levels = self.levels
         return None if levels is None else discrepancy_conditioning(self.model, levels[0])
 

@@ -42,7 +42,7 @@ from idtool._fit._plateau_drift import with_plateau_drift
 from idtool._fit._prefetch import CompileAhead
 from idtool._fit._program import lm_arguments, lm_program
 from idtool._fit._result import FitResult
-from idtool._fit._variability import compile_variability, with_variability
+from idtool._fit._with_levels import compile_variability, with_variability
 from idtool._model._actuator import ACTUATORS
 from idtool._model._benchmodel import bench_model, shared_params_of
 from idtool._model._coupling import COUPLINGS
