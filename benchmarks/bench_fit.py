@@ -526,7 +526,7 @@ def main(repeat: int = 1) -> None:
     from idtool._data._blocks import prepare_fit_data
     from idtool._fit._fit import fit_model, quasi_random
     from idtool._fit._lm import levenberg_marquardt_loop
-    from idtool._fit._program import _COMPILE, run_lm
+    from idtool._fit._program import _COMPILE, bench_normal_equations, level_structure, run_lm
     from idtool._model._benchmodel import bench_model
 
     t0 = time.perf_counter()
@@ -549,8 +549,9 @@ def main(repeat: int = 1) -> None:
     model = bench_model(data, "dahl", "power-limited")
     residuals = jax.jit(lambda z, phi: model.residuals(z, phi))
     jacobian = jax.jit(jax.jacfwd(lambda z, phi: model.residuals(z, phi)))
-    structure = model.level_structure
-    coloured = jax.jit(lambda z, phi: model.normal_equations(z, phi))
+    structure = level_structure(model)
+    equations = jax.tree_util.Partial(bench_normal_equations, model, structure)
+    coloured = jax.jit(lambda z, phi: equations(z, phi))
     zj = jnp.asarray(z_start)
     residuals(zj, phi).block_until_ready()
     jacobian(zj, phi).block_until_ready()
@@ -563,7 +564,7 @@ def main(repeat: int = 1) -> None:
 
     # the same iterations in a plain lax.while_loop: what optimistix's driver costs
     own_loop = jax.jit(
-        lambda z, mask, phi, n: levenberg_marquardt_loop(model.normal_equations, z, phi, mask, n),
+        lambda z, mask, phi, n: levenberg_marquardt_loop(equations, z, phi, mask, n),
         compiler_options=_COMPILE,
     )
 

@@ -6,7 +6,7 @@ depend on its own nuisances only. The Jacobian is then block-arrow shaped: of it
 columns, the per-trace ones touch disjoint rows. Columns that never share a row can be
 given one colour and probed by a single forward-mode product (Curtis, Powell and Reid
 1974), so a Jacobian costs ``n_shared + n_slots`` JVPs (10 on the example) instead of
-one per parameter (102); :meth:`idtool.BenchModel.normal_equations` goes to 8 by
+one per parameter (102); :func:`idtool._fit._program.bench_normal_equations` goes to 8 by
 differentiating the bench model in its per-trace levels. optimistix's own
 LevenbergMarquardt builds the dense Jacobian column by column (about 14x the work per
 step here, benchmarks/bench_fit.py); :class:`ColouredLevenbergMarquardt` is an optimistix
@@ -267,7 +267,7 @@ class ColouredLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     ``fn(z, args)`` returns the residuals ``r`` and, as its auxiliary output,
     ``(J^T J, J^T r, aux)`` at ``z`` (:func:`coloured_equations` makes such a function
     from plain residuals and their sparsity; the bench model's
-    :meth:`idtool.BenchModel.normal_equations` goes through the per-trace levels). So
+    :func:`idtool._fit._program.bench_normal_equations` goes through the per-trace levels). So
     one evaluation of ``fn`` per iteration is the whole linearisation: the residuals
     and one JVP per colour, never a dense Jacobian. optimistix drives the loop
     (:func:`optimistix.least_squares`); each iteration is :func:`_update`.

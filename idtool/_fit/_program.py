@@ -1,7 +1,9 @@
 """The one compiled Levenberg-Marquardt program every step of a fit runs: each start,
 polish, AR(1) round, interval check and profile point, of every dataset of about the
 same length and the same laws (its blocks padded to a bucketed count), and the figures'
-prediction at the optimum (the program run for no step).
+prediction at the optimum (the program run for no step); and the bench model's normal
+equations it solves (:func:`bench_normal_equations`): how the fit linearises the model,
+a concern of the solver's, not of the model (:mod:`idtool._model._benchmodel`).
 """
 
 from __future__ import annotations
@@ -11,13 +13,23 @@ import math
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, Float
 
 from idtool._data._blocks import FitData, padded_size
-from idtool._fit._lm import LMResult, levenberg_marquardt
+from idtool._fit._lm import ColouredJacobian, LMResult, levenberg_marquardt, normal_equations
 from idtool._model._benchmodel import BenchModel
 
-__all__ = ["lm_arguments", "lm_program", "prediction_at", "run_lm", "unwhiten"]
+__all__ = [
+    "bench_normal_equations",
+    "level_structure",
+    "lm_arguments",
+    "lm_program",
+    "prediction_at",
+    "run_lm",
+    "unwhiten",
+]
 
 # XLA's newer CPU fusion emitters compile the fit's programs ~30% slower for the same
 # run time (2.6 s vs 1.9 s for the LM loop on the example; benchmarks/bench_fit.py);
@@ -26,21 +38,66 @@ __all__ = ["lm_arguments", "lm_program", "prediction_at", "run_lm", "unwhiten"]
 _COMPILE = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 1}
 
 
+def level_structure(model: BenchModel) -> ColouredJacobian:
+    """The sparsity of the Jacobian of ``model``'s residuals in the inputs ``u = (OFF, ON
+    levels, z[k:])`` (:attr:`BenchModel.level_group`), coloured: outside a trace only
+    (NumPy on the model's block layout)."""
+    return ColouredJacobian.from_groups(model.level_group, model.data.block_trace)
+
+
+def bench_normal_equations(
+    model: BenchModel, structure: ColouredJacobian, z: Float[Array, " p"], phi: float | Array
+) -> tuple[Array, Array, Array, tuple[Array, Array, Array, Array]]:
+    """Whitened residuals ``r``, ``J^T J`` and ``J^T r`` of ``model`` at ``z``; and the
+    levels ``(OFF, ON)`` [N] (2 n_traces) with their Jacobian in the physical parameters,
+    and the normal equations in ``u`` (below), which the levels model reads.
+
+    The physical parameters reach the traces only through the per-trace OFF and ON
+    levels, so the Jacobian is taken in the bench model's inputs ``u = (OFF, ON,
+    z[k:])`` with one JVP per colour of ``structure`` (:func:`level_structure`; 8, 9
+    with the lag actuator; the contact model stays out of them) and mapped back by the
+    chain rule, ``J = J_u T`` with ``T = du/dz``: the levels' small Jacobian in the
+    physical parameters, the identity for the rest.
+    """
+    k, m = model.n_physical, model.data.n_traces
+    z = jnp.asarray(z)
+
+    def levels(zp):
+        off, on, _ = model.levels(model.values(z.at[:k].set(zp)))
+        return jnp.concatenate([off, on])
+
+    def resid(u):
+        return model.level_residuals(u, z, phi)
+
+    # (2 m, k) and (2 m,): the Jacobian and, from the same pass, the levels
+    dlv, lv = jax.jacfwd(lambda zp: (levels(zp),) * 2, has_aux=True)(z[:k])
+    u = jnp.concatenate([lv, z[k:]])
+    r, jtj_u, jtr_u = normal_equations(resid, u, structure)
+    n_rest = z.size - k
+    t = jnp.block([[dlv, jnp.zeros((2 * m, n_rest))], [jnp.zeros((n_rest, k)), jnp.eye(n_rest)]])
+    return r, t.T @ jtj_u @ t, t.T @ jtr_u, (lv, dlv, jtj_u, jtr_u)
+
+
 @functools.partial(jax.jit, compiler_options=_COMPILE)
-def lm_program(model: BenchModel, z0, mask, phi, max_steps) -> LMResult:
-    """The compiled program of :func:`run_lm` (its model already padded)."""
-    return levenberg_marquardt(model.normal_equations, z0, phi, mask, max_steps)
+def lm_program(
+    model: BenchModel, structure: ColouredJacobian, z0, mask, phi, max_steps
+) -> LMResult:
+    """The compiled program of :func:`run_lm` (its model already padded, ``structure``
+    its :func:`level_structure`)."""
+    equations = jax.tree_util.Partial(bench_normal_equations, model, structure)
+    return levenberg_marquardt(equations, z0, phi, mask, max_steps)
 
 
 def run_lm(model: BenchModel, z0, mask, phi, max_steps) -> LMResult:
     """Levenberg-Marquardt on the AR(1)-whitened residuals of ``model``
-    (:meth:`BenchModel.normal_equations`) over the parameters in ``mask``, returning
+    (:func:`bench_normal_equations`) over the parameters in ``mask``, returning
     them with the per-trace levels. The model is an argument, not a constant, and its
     blocks are padded to :func:`~idtool._data._blocks.padded_size` (residuals 0 there,
     cut off again here): one compiled program serves every start, polish, AR(1) round,
     profile point and every dataset of about the same length and the same laws."""
     n = model.data.force_n.shape[0]
-    out = lm_program(_padded(model), z0, mask, phi, max_steps)
+    padded = _padded(model)
+    out = lm_program(padded, level_structure(padded), z0, mask, phi, max_steps)
     # cut in NumPy: a JAX slice would be one more program to compile for every n
     return eqx.tree_at(lambda o: o.residuals, out, np.asarray(out.residuals)[:n])
 
@@ -50,7 +107,8 @@ def lm_arguments(model: BenchModel) -> tuple:
     give it, its blocks padded (for compiling ahead:
     :class:`~idtool._fit._prefetch.CompileAhead`)."""
     z = np.asarray(model.z0(), float)
-    return (_padded(model), z, np.ones(z.size, bool), 0.0, 0)
+    padded = _padded(model)
+    return (padded, level_structure(padded), z, np.ones(z.size, bool), 0.0, 0)
 
 
 def _padded(model: BenchModel) -> BenchModel:

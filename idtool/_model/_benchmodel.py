@@ -39,7 +39,6 @@ from jaxtyping import Array, ArrayLike, Float
 
 from idtool._data._blocks import FitData
 from idtool._data._start_values import start_values
-from idtool._fit._lm import ColouredJacobian, normal_equations
 from idtool._model._actuator import ACTUATORS, DEFAULT_ACTUATOR, AbstractActuator
 from idtool._model._bench import TraceTiming, on_friction_ratio
 from idtool._model._coupling import COUPLINGS, AbstractCoupling
@@ -75,7 +74,6 @@ class BenchModel(eqx.Module):
     data: FitData
     nuisance_centre: Float[Array, "groups traces"]  # data-driven start of each nuisance
     start_z: Float[Array, " shared"]  # data-driven internal start of the shared ones
-    level_structure: ColouredJacobian  # sparsity in (OFF, ON levels, z[k:])
     law: type[AbstractFrictionLaw] = eqx.field(static=True)
     coupling: type[AbstractCoupling] = eqx.field(static=True)
     actuator: type[AbstractActuator] = eqx.field(static=True)
@@ -153,14 +151,29 @@ class BenchModel(eqx.Module):
             [np.full(self.n_shared, -1), np.tile(np.arange(n), len(self.trace_groups))]
         )
 
+    @property
+    def level_group(self) -> np.ndarray:
+        """Per input of :meth:`level_residuals`, ``u = (OFF, ON levels, z[k:])``: -1 if
+        it moves every trace's residuals (a shared bench parameter), else the trace
+        whose residuals it alone moves (its levels and its nuisances): the sparsity the
+        fit's coloured Jacobian exploits (:func:`idtool._fit._program.level_structure`)."""
+        n, k = self.data.n_traces, self.n_physical
+        return np.concatenate(
+            [
+                np.arange(n),
+                np.arange(n),
+                np.full(self.n_shared - k, -1),
+                np.tile(np.arange(n), len(self.trace_groups)),
+            ]
+        )
+
     def padded(self, n_blocks: int) -> BenchModel:
         """This model on its data padded to ``n_blocks`` blocks (:meth:`FitData.padded`):
         the same residuals, then zeros; the same normal equations."""
         if n_blocks == self.data.force_n.shape[0]:
             return self
         data = self.data.padded(n_blocks)
-        structure = dataclasses.replace(self.level_structure, row_group=data.block_trace)
-        return dataclasses.replace(self, data=data, level_structure=structure)
+        return dataclasses.replace(self, data=data)
 
     def values(self, z: Float[Array | np.ndarray, " p"]) -> dict[str, Array]:
         """Physical values: shared names map to scalars, per-trace groups to arrays
@@ -274,40 +287,6 @@ class BenchModel(eqx.Module):
         # 0 at padded blocks (FitData.padded): no residual, no Jacobian row
         return whiten(e, jnp.asarray(self.data.first), phi) * jnp.asarray(self.data.block_weight)
 
-    def normal_equations(
-        self, z: Float[Array, " p"], phi: float | Array
-    ) -> tuple[Array, Array, Array, tuple[Array, Array, Array, Array]]:
-        """Whitened residuals ``r``, ``J^T J`` and ``J^T r`` at ``z``; and the levels
-        ``(OFF, ON)`` [N] (2 n_traces) with their Jacobian in the physical parameters,
-        and the normal equations in ``u`` (below), which the levels model reads.
-
-        The physical parameters reach the traces only through the per-trace OFF and ON
-        levels, so the Jacobian is taken in the bench model's inputs ``u = (OFF, ON,
-        z[k:])`` with one JVP per colour of :attr:`level_structure` (8, 9 with the lag
-        actuator; the contact model stays out of them) and mapped back by the chain
-        rule, ``J = J_u T`` with ``T = du/dz``: the levels' small Jacobian in the
-        physical parameters, the identity for the rest.
-        """
-        k, m = self.n_physical, self.data.n_traces
-        z = jnp.asarray(z)
-
-        def levels(zp):
-            off, on, _ = self.levels(self.values(z.at[:k].set(zp)))
-            return jnp.concatenate([off, on])
-
-        def resid(u):
-            return self.level_residuals(u, z, phi)
-
-        # (2 m, k) and (2 m,): the Jacobian and, from the same pass, the levels
-        dlv, lv = jax.jacfwd(lambda zp: (levels(zp),) * 2, has_aux=True)(z[:k])
-        u = jnp.concatenate([lv, z[k:]])
-        r, jtj_u, jtr_u = normal_equations(resid, u, self.level_structure)
-        n_rest = z.size - k
-        t = jnp.block(
-            [[dlv, jnp.zeros((2 * m, n_rest))], [jnp.zeros((n_rest, k)), jnp.eye(n_rest)]]
-        )
-        return r, t.T @ jtj_u @ t, t.T @ jtr_u, (lv, dlv, jtj_u, jtr_u)
-
 
 def shared_params_of(
     law: type[AbstractFrictionLaw],
@@ -374,20 +353,10 @@ def bench_model(
     n = data.n_traces
     centres = {"offset_n": s.offset_n, "pull_start_s": s.pull_start_s}
     nuisance_centre = np.stack([centres.get(g, np.zeros(n)) for g, _, _ in groups_of_trace])
-    k = sum(p.physical for p in shared)
-    groups = np.concatenate(
-        [
-            np.arange(n),
-            np.arange(n),
-            np.full(len(shared) - k, -1),
-            np.tile(np.arange(n), len(groups_of_trace)),
-        ]
-    )
     return BenchModel(
         data=data,
         nuisance_centre=jnp.asarray(nuisance_centre),
         start_z=jnp.asarray(start_z),
-        level_structure=ColouredJacobian.from_groups(groups, data.block_trace),
         law=law_cls,
         coupling=coupling_cls,
         actuator=actuator_cls,
