@@ -9,6 +9,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 from idtool._data._dataset import Dataset, load_dataset
+from idtool._data._select import select_traces
 from idtool._errors import IdtoolError
 from idtool._fit._parameter_table import parse_fix, read_parameter_table
 from idtool._fit._run import fit_dataset
@@ -16,7 +17,6 @@ from idtool._fit._store import load_stored_fit
 from idtool._model._names import BY_DESIGN
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._settings import ParameterSetting
-from idtool._predict._validation import select_traces
 from idtool._workflow import Fit
 
 __all__ = ["fit", "load_fit"]

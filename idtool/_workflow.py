@@ -22,6 +22,7 @@ import numpy as np
 
 from idtool._atomic import atomic_output_dir
 from idtool._data._dataset import Dataset, load_dataset
+from idtool._data._select import select_traces
 from idtool._data._write import write_dataset
 from idtool._diagnostic import from_records
 from idtool._errors import IdtoolError
@@ -41,7 +42,7 @@ from idtool._predict._predict import (
     draws_from_stored,
 )
 from idtool._predict._tables import Amplitudes, Predictions, amplitude_table, predict_table
-from idtool._predict._validation import Validation, select_traces, validate
+from idtool._predict._validation import Validation, validate
 
 __all__ = ["Fit"]
 

@@ -24,9 +24,7 @@ by ``idtool fit --traces``, or a later session's):
 from __future__ import annotations
 
 import dataclasses
-import fnmatch
 import math
-from collections.abc import Sequence
 
 import jax.numpy as jnp
 import numpy as np
@@ -39,36 +37,9 @@ from idtool._fit._program import run_lm
 from idtool._model._benchmodel import BenchModel, bench_model
 from idtool._predict._predict import Draws, predict_friction_ratio
 
-__all__ = ["TraceValidation", "Validation", "select_traces", "validate"]
+__all__ = ["TraceValidation", "Validation", "validate"]
 
 _STEPS = 200  # nuisance-only LM: a few unknowns per trace, converges in tens of steps
-
-
-def select_traces(dataset: Dataset, patterns: str | Sequence[str]) -> Dataset:
-    """The traces of ``dataset`` whose ids match any of ``patterns`` (shell globs,
-    comma-separated in a string; a pattern starting with ``!`` excludes). Raises
-    IdtoolError naming a pattern that matches nothing, or when none is left."""
-    if isinstance(patterns, str):
-        patterns = [p.strip() for p in patterns.split(",") if p.strip()]
-    include = [p for p in patterns if not p.startswith("!")]
-    exclude = [p[1:] for p in patterns if p.startswith("!")]
-    ids = [t.id for t in dataset.traces]
-    for p in include + exclude:
-        if not fnmatch.filter(ids, p):
-            raise IdtoolError(
-                f"--traces {p!r} matches no trace of {dataset.name}; its ids are "
-                + ", ".join(ids[:8])
-                + (" ..." if len(ids) > 8 else "")
-            )
-    kept = tuple(
-        t
-        for t in dataset.traces
-        if (not include or any(fnmatch.fnmatchcase(t.id, p) for p in include))
-        and not any(fnmatch.fnmatchcase(t.id, p) for p in exclude)
-    )
-    if not kept:
-        raise IdtoolError(f"--traces {','.join(patterns)!r} leaves no trace of {dataset.name}")
-    return dataclasses.replace(dataset, traces=kept)
 
 
 @dataclasses.dataclass(frozen=True)
