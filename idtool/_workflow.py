@@ -30,17 +30,13 @@ from idtool._fit._result import Estimate, FitResult
 from idtool._fit._run import FitRun
 from idtool._fit._store import StoredFit, law_state_file, save_fit_state
 from idtool._model._benchmodel import BenchModel
+from idtool._posterior._draws import draws_from_posterior, draws_from_stored
 from idtool._posterior._posterior import Posterior
 from idtool._posterior._runner import MAX_MINUTES, MAX_STEPS
 from idtool._posterior._sample import sample_posterior
 from idtool._posterior._store import POSTERIOR_FILE, load_posterior
 from idtool._predict._mixture import average_over_laws, chosen_law_weight
-from idtool._predict._predict import (
-    Draws,
-    draws_from_covariance,
-    draws_from_posterior,
-    draws_from_stored,
-)
+from idtool._predict._predict import Draws, draws_from_covariance
 from idtool._predict._tables import Amplitudes, Predictions, amplitude_table, predict_table
 from idtool._predict._validation import Validation, validate
 

@@ -11,8 +11,8 @@ import idtool
 from idtool._cli._main import main
 from idtool._fit._store import load_stored_fit, save_fit_state
 from idtool._posterior._diagnostics import import_arviz
+from idtool._posterior._draws import prediction_draws
 from idtool._predict._amplitude import amplitude_for_reduction
-from idtool._predict._mixture import prediction_draws
 from idtool._predict._predict import predict_friction_ratio
 from idtool._report._fit_text import fit_json
 

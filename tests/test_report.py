@@ -246,7 +246,7 @@ def test_the_answer_comes_first_with_its_bands(fitted):
     x amplitude (270/670 N x 50/70%), the numbers of idtool's own prediction from the
     same draws, and what the traces measured there; then the amplitude for 30 and 50%."""
     from idtool._fit._store import load_stored_fit
-    from idtool._predict._mixture import prediction_draws
+    from idtool._posterior._draws import prediction_draws
     from idtool._predict._tables import predict_table
 
     page = (fitted / "report.html").read_text()

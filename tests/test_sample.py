@@ -28,6 +28,7 @@ from idtool._model._benchmodel import bench_model
 from idtool._model._noise import whiten
 from idtool._posterior._chainfile import read_chain
 from idtool._posterior._diagnostics import diagnose
+from idtool._posterior._draws import draws_from_posterior
 from idtool._posterior._likelihood import (
     build_target,
     conditioning_shrinkage,
@@ -38,7 +39,7 @@ from idtool._posterior._likelihood import (
 )
 from idtool._posterior._prior import default_prior, read_priors
 from idtool._posterior._sample import sample_posterior
-from idtool._predict._predict import draws_from_posterior, predict_friction_ratio
+from idtool._predict._predict import predict_friction_ratio
 
 WALKERS, STEPS = 32, 300
 

@@ -35,10 +35,15 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.linalg import cho_solve
 
-from idtool._posterior._levels import LevelsTarget, _mean_and_cholesky
-from idtool._posterior._likelihood import Target, predict_blocks_batch, trace_logliks_batch
-from idtool._posterior._posterior import LEVELS, Posterior
+from idtool._posterior._levels import LevelsTarget, _mean_and_cholesky, build_levels_target
+from idtool._posterior._likelihood import (
+    Target,
+    build_target,
+    predict_blocks_batch,
+    trace_logliks_batch,
+)
 from idtool._posterior._ppc import replicate_blocks
+from idtool._posterior._record import LEVELS, PosteriorRecord
 
 __all__ = ["MAX_DRAWS", "levels_groups", "model_check_groups", "noise_groups", "thinned_steps"]
 
@@ -182,13 +187,10 @@ def noise_groups(theta: np.ndarray, target: Target, seed: int) -> dict:
 
 
 def model_check_groups(
-    post: Posterior, target: Target | LevelsTarget | None = None
+    post: PosteriorRecord, target: Target | LevelsTarget | None = None
 ) -> tuple[dict, np.ndarray]:
     """The model-check groups of ``post`` (which must carry its model) and the kept
     steps they were computed at; ``target``: its log-posterior's, if already built."""
-    from idtool._posterior._levels import build_levels_target
-    from idtool._posterior._likelihood import build_target
-
     assert post.model is not None
     burn = post.diagnostics.burn
     steps = thinned_steps(post.chain.shape[0] - burn, post.chain.shape[1])

@@ -1,99 +1,38 @@
-"""What the sampler takes and gives: a fit (:class:`FitLike`) in, a :class:`Posterior`
-out (:func:`idtool._posterior._sample.sample_posterior` between them)."""
+"""The posterior the public API hands out (:class:`Posterior`): the sampler's record of
+a chain (:class:`~idtool._posterior._record.PosteriorRecord`: its draws, diagnostics and
+summary) with what it is for: predictions (the prediction stage, below this one, from
+its draws) and its ArviZ ``InferenceData`` (the store and the model-check groups, which
+read the record)."""
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Protocol
 
-import numpy as np
-
-from idtool._errors import IdtoolError
-from idtool._fit._discrepancy import Conditioning
-from idtool._fit._free_levels import FreeLevels
-from idtool._model._benchmodel import BenchModel
-from idtool._model._params import Param
-from idtool._posterior._diagnostics import Diagnostics
-from idtool._posterior._prior import Prior
+from idtool._posterior._draws import draws_from_posterior
+from idtool._posterior._groups import model_check_groups
+from idtool._posterior._record import LEVELS, FitLike, PosteriorRecord
+from idtool._posterior._store import inference_data
+from idtool._predict._tables import amplitude_table, predict_table
 
 __all__ = ["LEVELS", "FitLike", "Posterior"]
 
-LEVELS = "levels"  # the 'noise' of a chain sampled on the levels model
-
-
-class FitLike(Protocol):
-    """What sampling needs from a fit (``FitResult`` and ``StoredFit`` both have it)."""
-
-    @property
-    def model(self) -> BenchModel: ...
-    @property
-    def z(self) -> np.ndarray: ...
-    @property
-    def cov_z(self) -> np.ndarray: ...
-    @property
-    def phi(self) -> float: ...
-    @property
-    def sigma_n(self) -> float: ...
-    @property
-    def levels(self) -> Any: ...
-    @property
-    def conditioning(self) -> Conditioning | None: ...
-
 
 @dataclasses.dataclass(frozen=True)
-class Posterior:
-    """An ensemble chain and what it says.
+class Posterior(PosteriorRecord):
+    """An ensemble chain and what it says, and what it predicts.
 
     ``chain`` (steps, walkers, ndim) is on the internal scale, ``values`` the same in
     physical units; the first ``diagnostics.burn`` steps are burn-in.
     """
 
-    params: tuple[Param, ...]
-    chain: np.ndarray
-    values: np.ndarray
-    log_prob: np.ndarray
-    acceptance: np.ndarray
-    diagnostics: Diagnostics
-    noise: str
-    priors: dict[str, Prior]
-    seed: int
-    law: str
-    coupling: str
-    timing: dict[str, float]
-    z_lin: np.ndarray  # BenchModel vector where the nuisances are linearised
-    warnings: tuple[str, ...] = ()
-    model: BenchModel | None = None  # the model sampled (for predictions)
-    conditioning: Conditioning | None = None  # the data the discrepancy is conditioned on
-    free_levels: FreeLevels | None = None  # the levels model's data (its noise is LEVELS)
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        return tuple(p.name for p in self.params)
-
-    def draws(self) -> dict[str, np.ndarray]:
-        """Kept draws (burn-in dropped) of every parameter, flat, physical units."""
-        kept = self.values[self.diagnostics.burn :]
-        return {n: kept[:, :, i].ravel() for i, n in enumerate(self.names)}
-
-    def _model(self) -> BenchModel:
-        if self.model is None:
-            raise IdtoolError("this posterior does not carry its model; predict from the Fit")
-        return self.model
-
     def predict(self, load_n, amplitude, speed_m_s=None, *, max_draws: int = 2000):
         """Friction ratio (median, 95% band) over loads [N] x amplitude fractions x
         speeds [m/s] from the kept draws: :class:`idtool.Predictions`."""
-        from idtool._predict._predict import draws_from_posterior
-        from idtool._predict._tables import predict_table
-
         draws = draws_from_posterior(self, self._model(), max_draws)
         return predict_table(draws, self._model().data, load_n, amplitude, speed_m_s)
 
     def amplitude_for(self, reduction_percent: float, load_n, speed_m_s=None, *, max_draws=2000):
         """The amplitude fraction for a target reduction [%]: :class:`idtool.Amplitudes`."""
-        from idtool._predict._predict import draws_from_posterior
-        from idtool._predict._tables import amplitude_table
-
         draws = draws_from_posterior(self, self._model(), max_draws)
         data = self._model().data
         return amplitude_table(draws, data, reduction_percent, load_n, speed_m_s)
@@ -102,23 +41,7 @@ class Posterior:
         """The chain as ArviZ ``InferenceData``: the content of ``posterior.nc``, with
         the groups ``az.loo``, ``az.compare`` and ``az.plot_ppc`` need when the
         posterior carries its model (README, "posterior.nc in ArviZ")."""
-        from idtool._posterior._groups import model_check_groups
-        from idtool._posterior._store import inference_data
-
         if self.model is None:
             return inference_data(self)
         groups, steps = model_check_groups(self)
         return inference_data(self, None, groups, steps)
-
-    def summary(self) -> dict[str, dict[str, Any]]:
-        out = {}
-        for p, (name, x) in zip(self.params, self.draws().items(), strict=True):
-            lo, med, hi = np.percentile(x, [2.5, 50.0, 97.5])
-            out[name] = {
-                "median": float(med),
-                "ci95": [float(lo), float(hi)],
-                "mean": float(np.mean(x)),
-                "sd": float(np.std(x)),
-                "unit": p.unit,
-            }
-        return out

@@ -20,6 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from idtool._atomic import atomic_file
+from idtool._plotting import MAX_WIDTH_IN, save_figure, subplots
 from idtool._posterior._likelihood import (
     Target,
     build_target,
@@ -27,7 +28,7 @@ from idtool._posterior._likelihood import (
     physical_values,
     predict_blocks,
 )
-from idtool._posterior._posterior import FitLike, Posterior
+from idtool._posterior._record import FitLike, PosteriorRecord
 
 __all__ = ["PredictiveCheck", "plot_predictive", "posterior_predictive", "replicate_blocks"]
 
@@ -97,7 +98,11 @@ def replicate_blocks(theta: np.ndarray, target: Target, seed: int) -> tuple[np.n
 
 
 def posterior_predictive(
-    post: Posterior, fit: FitLike, n_draws: int = 200, seed: int = 0, target: Target | None = None
+    post: PosteriorRecord,
+    fit: FitLike,
+    n_draws: int = 200,
+    seed: int = 0,
+    target: Target | None = None,
 ) -> PredictiveCheck:
     """Replicate the measured traces from ``n_draws`` kept draws of ``post``."""
     if target is None:
@@ -129,8 +134,6 @@ def posterior_predictive(
 
 def plot_predictive(check: PredictiveCheck, trace_ids: tuple[str, ...], path: str | Path) -> Path:
     """``ppc.png``: every trace with its bands, and the autocorrelation check."""
-    from idtool._plotting import MAX_WIDTH_IN, save_figure, subplots
-
     n = len(trace_ids)
     cols = 4
     rows = int(np.ceil((n + 1) / cols))

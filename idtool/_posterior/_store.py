@@ -30,7 +30,8 @@ from idtool._diagnostic import records
 from idtool._errors import IdtoolError
 from idtool._posterior._diagnostics import import_arviz
 from idtool._posterior._groups import thinned_steps
-from idtool._posterior._posterior import Posterior
+from idtool._posterior._record import PosteriorRecord
+from idtool._version import __version__
 
 __all__ = [
     "POSTERIOR_FILE",
@@ -44,7 +45,7 @@ POSTERIOR_FILE = "posterior.nc"
 
 
 def inference_data(
-    post: Posterior,
+    post: PosteriorRecord,
     extra: dict | None = None,
     groups: dict | None = None,
     steps: np.ndarray | None = None,
@@ -53,10 +54,6 @@ def inference_data(
     metadata document; ``groups`` (:func:`~idtool._posterior._groups.levels_groups` or
     ``noise_groups``) were computed at the kept ``steps`` (default: thinned_steps)."""
     import xarray as xr
-
-    from idtool._version import (
-        __version__,  # here: idtool/__init__ imports this module before defining it
-    )
 
     az = import_arviz()
     burn = post.diagnostics.burn
@@ -130,7 +127,7 @@ def inference_data(
 
 
 def write_posterior(
-    post: Posterior,
+    post: PosteriorRecord,
     path: str | os.PathLike,
     extra: dict | None = None,
     groups: dict | None = None,

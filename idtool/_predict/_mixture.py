@@ -22,20 +22,16 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from idtool._diagnostic import Diagnostic
-from idtool._fit._store import StoredFit
-from idtool._posterior._store import POSTERIOR_FILE, load_posterior
 from idtool._predict._predict import (
     Draws,
     Prediction,
     _thin,
     draws_from_covariance,
-    draws_from_stored,
 )
 
 __all__ = [
@@ -44,7 +40,6 @@ __all__ = [
     "chosen_law_weight",
     "law_disagreement_notes",
     "law_medians",
-    "prediction_draws",
 ]
 
 # Laws that hold at least this BIC weight count when the laws' curves are compared
@@ -133,19 +128,3 @@ def chosen_law_weight(doc: Mapping[str, Any], law: str) -> float:
     return next(
         (float(w["bic_weight"]) for w in doc.get("coupling_laws", []) if w["law"] == law), 1.0
     )
-
-
-def prediction_draws(fit: StoredFit, max_draws: int = 2000, seed: int = 0) -> Draws:
-    """Draws of a stored fit: its posterior's (``posterior.nc`` beside it), else
-    Gaussian on its covariance; averaged over the coupling laws it kept."""
-    path = Path(fit.folder) / POSTERIOR_FILE
-    cond = fit.conditioning
-    if path.is_file():
-        stored = load_posterior(path)
-        primary = draws_from_stored(stored, fit.model, max_draws, fit.sd_grids, seed, cond)
-    else:
-        primary = draws_from_covariance(
-            fit.model, fit.z, fit.cov_z, max_draws, seed, fit.sd_grids, cond
-        )
-    weight = chosen_law_weight(fit.doc, fit.model.coupling.name)
-    return average_over_laws(primary, weight, fit.alternates, seed)

@@ -1,5 +1,5 @@
-"""Predictions of the friction ratio from a posterior (issue 5); the inverse (the
-amplitude for a target) is :mod:`idtool._predict._amplitude`.
+"""Predictions of the friction ratio from draws of the parameters (issue 5); the inverse
+(the amplitude for a target) is :mod:`idtool._predict._amplitude`.
 
 For every draw of the physical parameters, the contact model's friction ratio FR at an
 operating point (normal load, commanded amplitude fraction, pull speed); the median and
@@ -7,6 +7,9 @@ the central 95% band over draws; the reduction is ``100 (1 - FR)`` %.
 
 Draws come from ``posterior.nc`` when there is one; without it, from a Gaussian on the
 fit's internal scale with the fit's covariance (say so: it is a local approximation).
+This module knows draws, not where a chain lives: :func:`chain_draws` takes a chain's
+kept draws by name, and :mod:`idtool._posterior._draws` hands it a posterior's (the
+posterior stage predicts through this one, so this one never imports it).
 """
 
 from __future__ import annotations
@@ -22,17 +25,14 @@ from idtool._data._blocks import FitData
 from idtool._diagnostic import Diagnostic
 from idtool._fit._discrepancy import Conditioning, discrepancy_moments, operating_coordinates
 from idtool._model._benchmodel import BenchModel
-from idtool._posterior._posterior import Posterior
-from idtool._posterior._store import PosteriorDraws
 
 SD_NAMES = ("discrepancy_fr", "scatter_fr")  # the sds a prediction uses
 
 __all__ = [
     "Draws",
     "Prediction",
+    "chain_draws",
     "draws_from_covariance",
-    "draws_from_posterior",
-    "draws_from_stored",
     "extrapolation_notes",
     "friction_ratio_draws",
     "predict_friction_ratio",
@@ -137,43 +137,7 @@ def _sds(
     )
 
 
-def draws_from_posterior(
-    post: Posterior,
-    model: BenchModel,
-    max_draws: int = 2000,
-    sd_grids: SdGrids | None = None,
-    seed: int = 0,
-    conditioning: Conditioning | None = None,
-) -> Draws:
-    """Prediction draws from an in-memory :class:`~idtool._posterior._posterior.Posterior`
-    (kept draws, thinned evenly to ``max_draws``); the sds from the posterior, else
-    from the fit's ``sd_grids``; the discrepancy conditioned on ``conditioning`` (default:
-    the posterior's own)."""
-    unconverged = "" if post.diagnostics.converged else "; the chain is NOT converged"
-    cond = conditioning or post.conditioning
-    chain = post.draws()
-    return _chain_draws(chain, post.noise, unconverged, model, max_draws, sd_grids, seed, cond)
-
-
-def draws_from_stored(
-    post: PosteriorDraws,
-    model: BenchModel,
-    max_draws: int = 2000,
-    sd_grids: SdGrids | None = None,
-    seed: int = 0,
-    conditioning: Conditioning | None = None,
-) -> Draws:
-    """Prediction draws from ``posterior.nc`` read back (:func:`load_posterior`)."""
-    unconverged = ""
-    if not post.meta["diagnostics"]["converged"]:
-        unconverged = "; the chain is NOT converged, see sample.json"
-    noise = post.meta["noise"]
-    return _chain_draws(
-        post.values, noise, unconverged, model, max_draws, sd_grids, seed, conditioning
-    )
-
-
-def _chain_draws(
+def chain_draws(
     chain: dict[str, np.ndarray],
     noise: str,
     unconverged: str,

@@ -22,8 +22,8 @@ from idtool._diagnostic import BANNER_CODES, banner_label, from_records, with_co
 from idtool._errors import IdtoolError
 from idtool._fit._store import load_stored_fit
 from idtool._posterior._diagnostics import STOP_REASONS
+from idtool._posterior._draws import prediction_draws
 from idtool._posterior._store import POSTERIOR_FILE
-from idtool._predict._mixture import prediction_draws
 from idtool._report._answer import answer
 from idtool._report._html_validation import validation_banner, validation_section
 from idtool._report._page import (
