@@ -92,7 +92,7 @@ _LAZY = {
     "Validation": "idtool._predict._validation",
     "write_report": "idtool._report._html",
     "Comparison": "idtool._report._compare",
-    "compare_fits": "idtool._report._compare",
+    "compare_fits": "idtool._entry",
     "BenchParams": "idtool._simulate._params",
     "load_bench_params": "idtool._simulate._params",
     "BenchTruth": "idtool._simulate._truth",
@@ -200,7 +200,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
     from idtool._data._example import example_dataset_path, example_params_path
     from idtool._data._import import import_daq
     from idtool._data._write import write_dataset
-    from idtool._entry import fit, load_fit
+    from idtool._entry import compare_fits, fit, load_fit
     from idtool._errors import IdtoolError
     from idtool._fit._parameter_table import read_parameter_table
     from idtool._fit._result import Estimate
@@ -239,7 +239,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
     from idtool._predict._predict import Prediction
     from idtool._predict._tables import Amplitudes, Predictions
     from idtool._predict._validation import Validation
-    from idtool._report._compare import Comparison, compare_fits
+    from idtool._report._compare import Comparison
     from idtool._report._html import write_report
     from idtool._simulate._params import BenchParams, load_bench_params
     from idtool._simulate._simulate import simulate_bench, write_simulation

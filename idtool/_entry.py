@@ -1,5 +1,9 @@
 """The entry points of the public workflow: :func:`fit` a dataset into a
-:class:`~idtool.Fit`, or :func:`load_fit` one saved by :meth:`Fit.save`."""
+:class:`~idtool.Fit`, :func:`load_fit` one saved by :meth:`Fit.save`, and
+:func:`compare_fits` fits or their folders. The top of the library, below only the
+command line: the report stage below reads fits through interfaces of its own
+(:class:`~idtool._report._comparison.FitToCompare`), never this module or the
+:class:`Fit` class."""
 
 from __future__ import annotations
 
@@ -17,9 +21,10 @@ from idtool._fit._store import load_stored_fit
 from idtool._model._names import BY_DESIGN
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._settings import ParameterSetting
+from idtool._report._compare import TARGETS, Comparison, compare, compare_request
 from idtool._workflow import Fit
 
-__all__ = ["fit", "load_fit"]
+__all__ = ["compare_fits", "fit", "load_fit"]
 
 
 def fit(
@@ -125,3 +130,34 @@ def load_fit(path: str | os.PathLike) -> Fit:
     found it, unchanged (its sha256 is checked)."""
     stored = load_stored_fit(Path(path))
     return Fit(stored.dataset, stored, None, Path(path))
+
+
+def compare_fits(
+    fits: Sequence[Fit | str | os.PathLike],
+    load_n: float | Sequence[float] | None = None,
+    amplitude: float | Sequence[float] | None = None,
+    *,
+    speed_m_s: float | None = None,
+    targets: Sequence[float] = TARGETS,
+    max_draws: int = 2000,
+    seed: int = 0,
+) -> Comparison:
+    """Compare two or more fits (fit folders or :class:`~idtool.Fit`) at the loads
+    ``load_n`` [N] x commanded amplitude fractions ``amplitude`` (default: the values
+    every fit tested, else the first fit's) and ``speed_m_s`` [m/s] (default: the fits'
+    common pull speed). The first fit is the reference: the probability that it reduces
+    friction more than each other fit, from ``max_draws`` independent draws of each
+    (posterior, else the fit's covariance: flagged), and the amplitude each needs for
+    ``targets`` [% reduction]. Fits from different rigs are refused (IdtoolError)."""
+    labels, checked = compare_request(fits, targets, max_draws)
+    loaded = [f if isinstance(f, Fit) else load_fit(f) for f in fits]
+    return compare(
+        loaded,
+        labels,
+        load_n,
+        amplitude,
+        speed_m_s=speed_m_s,
+        targets=checked,
+        max_draws=max_draws,
+        seed=seed,
+    )

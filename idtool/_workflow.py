@@ -39,6 +39,8 @@ from idtool._predict._mixture import average_over_laws, chosen_law_weight
 from idtool._predict._predict import Draws, draws_from_covariance
 from idtool._predict._tables import Amplitudes, Predictions, amplitude_table, predict_table
 from idtool._predict._validation import Validation, validate
+from idtool._report._fit_text import fit_json, fit_report, plot_fit
+from idtool._report._sample_text import write_posterior_outputs
 
 __all__ = ["Fit"]
 
@@ -164,8 +166,6 @@ class Fit:
     def report(self) -> str:
         """The fit report a person reads (estimates, intervals, correlations, model
         comparison, friction ratio per operating point, warnings)."""
-        from idtool._report._fit_text import fit_report
-
         if self.run is not None:
             return fit_report(self.run)
         assert self.folder is not None
@@ -216,8 +216,6 @@ class Fit:
         """Write the posterior's files (``posterior.nc``, ``sample.json``,
         ``report_sample.txt``, ``ppc.png``) into ``folder`` (default: where the fit was
         saved); returns the posterior's text report."""
-        from idtool._report._sample_text import write_posterior_outputs
-
         if self.posterior is None:
             raise IdtoolError("no posterior yet: call Fit.sample() first")
         where = folder if folder is not None else self.folder
@@ -327,8 +325,6 @@ class Fit:
     # ------------------------------------------------------------------ files
     def to_json(self, command: Sequence[str] | None = None) -> dict:
         """The ``fit.json`` document (schema in the README)."""
-        from idtool._report._fit_text import fit_json
-
         if self.run is None:
             assert isinstance(self._state, StoredFit)
             return self._state.doc
@@ -348,8 +344,6 @@ class Fit:
         existing folder is replaced only with ``force``. A dataset that lives in memory
         only (simulated) is written into the folder's ``dataset/`` so the fit can be
         read back. ``command`` is recorded as provenance (default: the process's)."""
-        from idtool._report._fit_text import plot_fit
-
         if self.run is None:
             raise IdtoolError("this fit was read from disk; it is saved already")
         started = time.perf_counter()

@@ -22,7 +22,8 @@ def _check(name: str, values: list[float] | None, lo: float, hi: float) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     # local: the comparison imports JAX, which the other commands' start-up must not
-    from idtool._report._compare import TARGETS, compare_fits, default_out
+    from idtool._entry import compare_fits
+    from idtool._report._compare import TARGETS, default_out
 
     # Everything that can be refused is refused before the fits are read and compared
     # (tens of seconds), and nothing is written then.

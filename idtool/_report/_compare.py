@@ -1,6 +1,7 @@
 """``idtool compare``: materials (or sessions) side by side in one report.
 
-:func:`compare_fits` reads two or more fits and, at the compared loads x amplitudes,
+:func:`idtool.compare_fits` (:mod:`idtool._entry`, which reads the fit folders) hands
+:func:`compare` two or more fits and, at the compared loads x amplitudes,
 gives each fit's friction ratio, the probability that the first fit (the reference)
 reduces friction more than each other fit with the difference in reduction points
 (:mod:`idtool._predict._compare`), the amplitude each needs for the target reductions,
@@ -23,12 +24,10 @@ import numpy as np
 
 from idtool._atomic import atomic_output_dir
 from idtool._diagnostic import BANNER_CODES, banner_label, reworded, with_code
-from idtool._entry import load_fit
 from idtool._errors import IdtoolError
 from idtool._posterior._store import POSTERIOR_FILE
 from idtool._predict._amplitude import AmplitudeFor
 from idtool._predict._compare import (
-    PairPoint,
     comparability,
     compare_at,
     tested_values,
@@ -36,151 +35,45 @@ from idtool._predict._compare import (
 )
 from idtool._predict._predict import (
     Draws,
-    Prediction,
     extrapolation_notes,
     friction_ratio_draws,
     predictions_from_draws,
 )
 from idtool._predict._tables import amplitude_table
-from idtool._report._compare_html import SECTIONS, compare_html, prob
+from idtool._report._compare_figures import Curve, compare_figures
+from idtool._report._compare_html import SECTIONS, compare_html
+from idtool._report._comparison import (
+    CURVE_DRAWS,
+    ComparedFit,
+    ComparisonRecord,
+    FitToCompare,
+)
 from idtool._report._page import now_utc, options_bytes, report_id
-from idtool._version import __version__
-from idtool._workflow import Fit
 
-__all__ = ["SECTIONS", "TARGETS", "ComparedFit", "Comparison", "compare_fits", "default_out"]
+__all__ = [
+    "SECTIONS",
+    "TARGETS",
+    "ComparedFit",
+    "Comparison",
+    "compare",
+    "compare_request",
+    "default_out",
+]
 
 TARGETS = (30.0, 50.0)
-FIGURES = ("fr_vs_amplitude.png", "fr_vs_load.png")
-# Draws for the curves and the amplitude inverse (the contact model solved per draw at
-# every grid or bisection point): 400, as report.html, puts the 2.5% and 97.5% points
-# within about 1% of their limits. The probabilities use every draw.
-CURVE_DRAWS = 400
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
-class ComparedFit:
-    """One fit of a comparison: its ``label`` (the folder's name), the fit, its draws,
-    its ``(mean, new pull)`` FR draws (draws, points) at the comparison's operating
-    points, their :class:`~idtool.Prediction` rows, and the amplitude for each target
-    reduction at each compared load (target-major)."""
-
-    label: str
-    fit: Fit
-    draws: Draws
-    friction_ratio: tuple[np.ndarray, np.ndarray]
-    predictions: tuple[Prediction, ...]
-    amplitudes: tuple[AmplitudeFor, ...]
-
-    @property
-    def has_posterior(self) -> bool:
-        return self.draws.source == "posterior"
-
-    @property
-    def converged(self) -> bool:
-        """False for a posterior whose chain did not converge (its draws say so)."""
-        return "NOT converged" not in self.draws.note
-
-    def tested(self, name: str) -> list[float]:
-        return tested_values(self.fit.model.data, name)
-
-    def estimates(self) -> dict[str, dict]:
-        """Each physical parameter: median and 95% interval over the posterior's draws,
-        or the fit's estimate and interval without a posterior; with its unit."""
-        out = {}
-        for name in self.fit.model.physical_names:
-            e = self.fit.estimates[name]
-            if self.has_posterior:
-                lo, med, hi = np.percentile(self.draws.values[name], [2.5, 50.0, 97.5])
-                value, ci, source = float(med), [float(lo), float(hi)], "posterior"
-            else:
-                value, ci, source = e.estimate, list(e.ci95), "fit"
-            out[name] = {"unit": e.unit, "estimate": value, "ci95": ci, "source": source}
-        physical = {p.name for p in self.fit.model.declared_params if p.physical}
-        for name, value in self.fit.model.fixed.items():  # held in the fit: by whom, said
-            if name not in physical:
-                continue
-            e = self.fit.estimates[name]
-            out[name] = {
-                "unit": e.unit,
-                "estimate": value,
-                "ci95": [value, value],
-                "source": "fixed",
-                "fixed_by": e.fixed_label or "fixed",
-            }
-        return out
-
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class Comparison:
-    """Fits side by side (:func:`compare_fits`). ``pairs``: (reference label, other
+class Comparison(ComparisonRecord):
+    """Fits side by side (:func:`idtool.compare_fits`). ``pairs``: (reference label, other
     label, one :class:`~idtool._predict._compare.PairPoint` per operating point of
     ``grid``); ``banners``: what must be read first (unconverged chains, misfit,
     extrapolation); ``warnings``: those and every other doubt."""
-
-    fits: tuple[ComparedFit, ...]
-    load_n: tuple[float, ...]
-    amplitude: tuple[float, ...]
-    speed_m_s: float
-    targets: tuple[float, ...]
-    pairs: tuple[tuple[str, str, tuple[PairPoint, ...]], ...]
-    banners: tuple[str, ...]
-    warnings: tuple[str, ...]
-    seed: int
-    created_utc: str
-    id: str
-
-    @property
-    def grid(self) -> np.ndarray:
-        """The operating points (load [N], amplitude fraction, speed [m/s]), load-major."""
-        rows = [(n, a, self.speed_m_s) for n in self.load_n for a in self.amplitude]
-        return np.array(rows, float)
-
-    def to_dict(self) -> dict:
-        """The ``compare.json`` document."""
-        return {
-            "idtool_version": __version__,
-            "id": self.id,
-            "created_utc": self.created_utc,
-            "seed": self.seed,
-            "reference": self.fits[0].label,
-            "fits": [_fit_doc(f) for f in self.fits],
-            "operating_points": {
-                "normal_load_n": list(self.load_n),
-                "amplitude_fraction": list(self.amplitude),
-                "pull_speed_m_s": self.speed_m_s,
-            },
-            "probabilities": [
-                {"a": a, "b": b, "points": [p.to_dict() for p in pts]} for a, b, pts in self.pairs
-            ],
-            "predictions": {f.label: [p.to_dict() for p in f.predictions] for f in self.fits},
-            "targets_percent": list(self.targets),
-            "amplitudes": {f.label: [a.to_dict() for a in f.amplitudes] for f in self.fits},
-            "estimates": {f.label: f.estimates() for f in self.fits},
-            "figures": list(FIGURES),
-            "banners": list(self.banners),
-            "warnings": list(self.warnings),
-        }
-
-    def summary(self) -> str:
-        """The probabilities and differences as lines of text, then the warnings."""
-        lines = []
-        for a, b, pts in self.pairs:
-            for p in pts:
-                med, lo, hi = p.reduction_difference
-                lines.append(
-                    f"{a} vs {b} at {p.normal_load_n:g} N, amplitude {p.amplitude_fraction:.0%}: "
-                    f"P({a} reduces friction more) {prob(p.probability, p.standard_error, '+-')}; "
-                    f"reduction {a} - {b} = {med:+.1f} points "
-                    f"[{lo:+.1f}, {hi:+.1f}]"
-                )
-        return "\n".join(lines + [f"warning: {w}" for w in self.warnings])
 
     def write(self, out: str | os.PathLike, *, force: bool = False) -> Path:
         """Write ``compare.html``, ``compare.json`` and the figures into the folder
         ``out`` all or nothing; an existing ``out`` is replaced only with ``force``.
         Returns the path of ``compare.html``."""
-        from idtool._report._compare_figures import Curve, compare_figures
-
         curves = [
             Curve(
                 f.label,
@@ -198,33 +91,10 @@ class Comparison:
         return Path(out) / "compare.html"
 
 
-def _fit_doc(f: ComparedFit) -> dict:
-    ds, rig, model = f.fit.dataset, f.fit.dataset.rig, f.fit.model
-    return {
-        "label": f.label,
-        "folder": None if f.fit.folder is None else str(f.fit.folder),
-        "material": ds.material,
-        "dataset": {"name": ds.name, "sha256": ds.sha256, "traces": len(ds.traces)},
-        "rig": {
-            "vibration_frequency_hz": rig.vibration_frequency_hz,
-            "max_amplitude_m": rig.max_amplitude_m,
-        },
-        "model": {"law": model.law.name, "coupling": model.coupling.name},
-        "tested": {
-            "normal_load_n": f.tested("normal_load_n"),
-            "amplitude_fraction": f.tested("amplitude_fraction"),
-            "pull_speed_m_s": f.tested("pull_speed_m_s"),
-        },
-        "posterior": f.has_posterior,
-        "draws": {"source": f.draws.source, "note": f.draws.note, "n": f.draws.n},
-        "warnings": f.fit.warnings,
-    }
-
-
-def _label(item: Fit | str | os.PathLike) -> str:
-    if isinstance(item, Fit):
-        return item.folder.resolve().name if item.folder is not None else item.dataset.name
-    return Path(item).resolve().name
+def _label(item: FitToCompare | str | os.PathLike) -> str:
+    if isinstance(item, str | os.PathLike):
+        return Path(item).resolve().name
+    return item.folder.resolve().name if item.folder is not None else item.dataset.name
 
 
 def default_out(fits: Sequence[str | os.PathLike]) -> Path:
@@ -232,7 +102,7 @@ def default_out(fits: Sequence[str | os.PathLike]) -> Path:
     return Path(fits[0]).resolve().parent / ("compare-" + "-".join(_label(f) for f in fits))
 
 
-def _common(fits: list[Fit], name: str) -> tuple[list[float], str]:
+def _common(fits: Sequence[FitToCompare], name: str) -> tuple[list[float], str]:
     """The values of ``name`` every fit tested, else the first fit's, with a warning."""
     seen = [tested_values(f.model.data, name) for f in fits]
     common = [v for v in seen[0] if all(any(np.isclose(v, w) for w in s) for s in seen[1:])]
@@ -250,23 +120,13 @@ def _numbers(name: str, values, lo: float, hi: float) -> list[float]:
     return out
 
 
-def compare_fits(
-    fits: Sequence[Fit | str | os.PathLike],
-    load_n: float | Sequence[float] | None = None,
-    amplitude: float | Sequence[float] | None = None,
-    *,
-    speed_m_s: float | None = None,
-    targets: Sequence[float] = TARGETS,
-    max_draws: int = 2000,
-    seed: int = 0,
-) -> Comparison:
-    """Compare two or more fits (fit folders or :class:`~idtool.Fit`) at the loads
-    ``load_n`` [N] x commanded amplitude fractions ``amplitude`` (default: the values
-    every fit tested, else the first fit's) and ``speed_m_s`` [m/s] (default: the fits'
-    common pull speed). The first fit is the reference: the probability that it reduces
-    friction more than each other fit, from ``max_draws`` independent draws of each
-    (posterior, else the fit's covariance: flagged), and the amplitude each needs for
-    ``targets`` [% reduction]. Fits from different rigs are refused (IdtoolError)."""
+def compare_request(
+    fits: Sequence[FitToCompare | str | os.PathLike], targets: Sequence[float], max_draws: int
+) -> tuple[list[str], list[float]]:
+    """The checks of :func:`idtool.compare_fits` that come before any fit is read: the
+    fits' labels (their folders' names, numbered where two agree) and the targets;
+    IdtoolError for fewer than two fits, a target outside (0, 100), too few draws or
+    the same folder twice."""
     if len(fits) < 2:
         raise IdtoolError(f"give at least two fits to compare (got {len(fits)})")
     targets = [float(t) for t in targets]
@@ -276,11 +136,26 @@ def compare_fits(
     if max_draws < 10:
         raise IdtoolError(f"max_draws = {max_draws}: give at least 10")
     labels = [_label(f) for f in fits]
-    folders = [str(Path(f).resolve()) for f in fits if not isinstance(f, Fit)]
+    folders = [str(Path(f).resolve()) for f in fits if isinstance(f, str | os.PathLike)]
     if len(set(folders)) < len(folders):
         raise IdtoolError("the same fit folder is given twice: give different fits")
     labels = [x if labels.count(x) == 1 else f"{x} ({i + 1})" for i, x in enumerate(labels)]
-    loaded = [f if isinstance(f, Fit) else load_fit(f) for f in fits]
+    return labels, targets
+
+
+def compare(
+    loaded: Sequence[FitToCompare],
+    labels: Sequence[str],
+    load_n: float | Sequence[float] | None = None,
+    amplitude: float | Sequence[float] | None = None,
+    *,
+    speed_m_s: float | None = None,
+    targets: Sequence[float] = TARGETS,
+    max_draws: int = 2000,
+    seed: int = 0,
+) -> Comparison:
+    """:func:`idtool.compare_fits` of fits read already (``labels`` and ``targets`` from
+    :func:`compare_request`)."""
     warnings = comparability(
         labels,
         [f.dataset.rig for f in loaded],
@@ -332,7 +207,7 @@ def compare_fits(
 
 def _compare_one(
     label: str,
-    fit: Fit,
+    fit: FitToCompare,
     draws: Draws,
     loads: Sequence[float],
     amps: Sequence[float],
@@ -378,7 +253,7 @@ def _compare_one(
     return ComparedFit(label, fit, draws, fr, preds, tuple(amp_rows)), banners, warnings
 
 
-def _fit_bytes(fit: Fit) -> list[bytes]:
+def _fit_bytes(fit: FitToCompare) -> list[bytes]:
     """What identifies a fit's answers: its ``fit.json`` and ``posterior.nc``."""
     if fit.folder is None:
         return [json.dumps(fit.to_json(), sort_keys=True).encode()]

@@ -9,14 +9,11 @@ from __future__ import annotations
 import html
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from idtool._report._answer import _amplitude_cell
+from idtool._report._comparison import DECISIVE, ComparisonRecord, prob
 from idtool._report._page import g, img, kv_table, page, table
 from idtool._version import __version__
-
-if TYPE_CHECKING:
-    from idtool._report._compare import Comparison
 
 __all__ = ["DECISIVE", "SECTIONS", "compare_html", "prob"]
 
@@ -28,18 +25,9 @@ SECTIONS = (
     "Warnings",
     "Provenance",
 )
-DECISIVE = 0.95  # a probability beyond 0.95 (or below 0.05) names the better fit
 
 
-def prob(p: float, se: float | None = None, pm: str = "\u00b1") -> str:
-    """A probability as ``= 0.734 ± 0.012`` (3 decimals, with its standard error), or
-    ``> 0.999`` / ``< 0.001`` (``pm``: the plus-minus sign; "+-" in a terminal)."""
-    if p > 0.999 or p < 0.001:
-        return "> 0.999" if p > 0.999 else "< 0.001"
-    return f"= {p:.3f}" + ("" if se is None else f" {pm} {se:.3f}")
-
-
-def _beyond(c: Comparison, name: str, value: float, text: str) -> str:
+def _beyond(c: ComparisonRecord, name: str, value: float, text: str) -> str:
     """``text``, marked when ``value`` of ``name`` lies outside some fit's tested range."""
     outside = any(
         not min(f.tested(name)) * (1 - 1e-9) <= value <= max(f.tested(name)) * (1 + 1e-9)
@@ -56,7 +44,7 @@ def _verdict(a: str, b: str, p: float) -> str:
     return "not resolved"
 
 
-def _answer(c: Comparison) -> str:
+def _answer(c: ComparisonRecord) -> str:
     """Per pair, at each operating point: both FRs, the difference, the probability."""
     by_label = {f.label: f for f in c.fits}
     out = (
@@ -100,7 +88,7 @@ def _answer(c: Comparison) -> str:
     return out
 
 
-def _amplitudes(c: Comparison) -> str:
+def _amplitudes(c: ComparisonRecord) -> str:
     rows = []
     n_loads = len(c.load_n)
     for t, target in enumerate(c.targets):
@@ -124,7 +112,7 @@ def _interval(ci: Sequence[float]) -> str:
     return f"{g(ci[0])}, {g(ci[1])}"
 
 
-def _estimates(c: Comparison) -> str:
+def _estimates(c: ComparisonRecord) -> str:
     est = {f.label: f.estimates() for f in c.fits}
     names = list(dict.fromkeys(n for e in est.values() for n in e))  # fixed ones too
     rows = []
@@ -146,7 +134,7 @@ def _estimates(c: Comparison) -> str:
     return table(["parameter", "unit"] + [f"{f.label} [95%]" for f in c.fits], [*rows, source])
 
 
-def _header(c: Comparison) -> str:
+def _header(c: ComparisonRecord) -> str:
     rows = []
     for f in c.fits:
         ds, m = f.fit.dataset, f.fit.model
@@ -184,7 +172,7 @@ def _header(c: Comparison) -> str:
     return fits + f'<p class="note">{sha}</p>' + table(None, meta, cls="meta")
 
 
-def compare_html(c: Comparison, figures: Sequence[Path]) -> str:
+def compare_html(c: ComparisonRecord, figures: Sequence[Path]) -> str:
     """The page of ``c`` with the figures ``figures`` (FR against amplitude, load)."""
     docs = {f.label: f.fit.to_json() for f in c.fits}  # fit.json (built, if in memory)
     sec = {
