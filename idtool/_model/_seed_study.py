@@ -18,7 +18,9 @@ import numpy as np
 import pandas as pd
 from jaxtyping import Array
 
+from idtool._model._limits import coulomb_friction_ratio
 from idtool._model._transducer import Transducer, table2, transducer_steady_state
+from idtool._plotting import subplots
 
 __all__ = ["SEED_FIGURES", "SeedFigure", "plot_seed_study", "seed_study"]
 
@@ -94,9 +96,6 @@ def seed_study(
 
 def plot_seed_study(table: pd.DataFrame, out_dir, figures=SEED_FIGURES) -> list:
     """One PNG per figure: (a) FR and (b) PDR against VR, a curve per value."""
-    from idtool._model._limits import coulomb_friction_ratio
-    from idtool._plotting import subplots
-
     paths = []
     for fig in figures:
         rows = table[table.figure == fig.figure]

@@ -13,6 +13,7 @@ from idtool._fit._program import prediction_at
 from idtool._fit._result import Estimate, FitResult
 from idtool._fit._run import FitRun
 from idtool._fit._store import law_state_file
+from idtool._plotting import MAX_WIDTH_IN, save_figure, subplots
 from idtool._provenance import provenance
 from idtool._version import __version__
 
@@ -323,8 +324,6 @@ def plot_fit(run: FitRun, out_dir: str | Path) -> list[Path]:
     """``traces.png`` (data and fit, with the 95% band of the block means' noise around
     the fit: +-1.96 sigma_n / sqrt(1 - phi^2), the AR(1) noise's stationary sd),
     ``residuals.png`` and, if profiled, ``profile.png``."""
-    from idtool._plotting import MAX_WIDTH_IN, save_figure, subplots
-
     r, d = run.chosen, run.data
     out = Path(out_dir)
     pred, w = prediction_at(r.model, r.z, r.phi)

@@ -21,10 +21,17 @@ from idtool._atomic import atomic_output_dir, write_text_atomic
 from idtool._diagnostic import BANNER_CODES, banner_label, from_records, with_code
 from idtool._errors import IdtoolError
 from idtool._fit._store import load_stored_fit
-from idtool._posterior._diagnostics import STOP_REASONS
+from idtool._posterior._diagnostics import STOP_REASONS, import_arviz
 from idtool._posterior._draws import prediction_draws
 from idtool._posterior._store import POSTERIOR_FILE
 from idtool._report._answer import answer
+from idtool._report._figures import (
+    amplitude_map_figure,
+    corner_figure,
+    correlation_figure,
+    friction_ratio_figures,
+    walker_figure,
+)
 from idtool._report._html_validation import validation_banner, validation_section
 from idtool._report._page import (
     g,
@@ -88,8 +95,6 @@ def _posterior(folder: Path):
     path = folder / POSTERIOR_FILE
     if not path.is_file():
         return None, None
-    from idtool._posterior._diagnostics import import_arviz
-
     idata = import_arviz().from_netcdf(str(path))
     return idata.posterior, json.loads(idata.posterior.attrs["idtool"])
 
@@ -225,13 +230,6 @@ def write_report(
     for load in loads_n:
         if not load > 0.0:
             raise IdtoolError(f"loads_n: {load:g} N is not a positive load")
-    from idtool._report._figures import (
-        amplitude_map_figure,
-        corner_figure,
-        correlation_figure,
-        friction_ratio_figures,
-        walker_figure,
-    )
 
     folder = Path(fit_folder)
     fit = load_stored_fit(folder)

@@ -14,6 +14,7 @@ from idtool._atomic import write_text_atomic
 from idtool._diagnostic import records
 from idtool._fit._result import Estimate
 from idtool._model._noise import DEFAULT_NOISE
+from idtool._plotting import MAX_WIDTH_IN, save_figure, subplots
 from idtool._posterior._groups import model_check_groups
 from idtool._posterior._levels import (
     LevelsCheck,
@@ -171,8 +172,6 @@ def write_posterior_outputs(
 def plot_levels_check(check: LevelsCheck, free, model, path: Path) -> Path:
     """``ppc.png`` of a levels-model posterior: each trace's own friction ratio and OFF
     level (relative to the median) with their error bars, over the 95% predictive band."""
-    from idtool._plotting import MAX_WIDTH_IN, save_figure, subplots
-
     m = model.data.n_traces
     y, (lo, hi) = check.y, check.band
     fig, (a1, a2) = subplots(1, 2, figsize=(MAX_WIDTH_IN, 5.0))

@@ -7,6 +7,7 @@ import dataclasses
 from typing import Any
 
 from idtool._simulate._params import BenchParams
+from idtool._version import __version__
 
 __all__ = ["BenchTruth", "OperatingPoint", "OperatingPointTruth", "TraceTruth"]
 
@@ -120,10 +121,6 @@ class BenchTruth:
         ``coupling_in_fit`` is false for a truth-only coupling law: the fit cannot
         represent the truth, so its coupling parameters have no true value to cover.
         """
-        from idtool._version import (
-            __version__,  # here: idtool/__init__ imports this module before defining it
-        )
-
         contact = self.params.contact
         return {
             "seed": self.seed,
