@@ -16,10 +16,13 @@ $(STAMP): pyproject.toml constraints.txt
 demo: $(STAMP)
 	$(BIN)/idtool demo --force
 
+# lint-imports: the import layers and contracts of [tool.importlinter] in pyproject.toml
+# (docs/architecture.md, "Layers").
 lint: $(STAMP)
 	$(BIN)/ruff check idtool tests benchmarks
 	$(BIN)/ruff format --check idtool tests benchmarks
 	$(BIN)/mypy
+	$(BIN)/lint-imports --no-cache
 
 test: lint
 	MPLBACKEND=Agg $(BIN)/python -m pytest -n 2 --dist loadfile --durations=30
