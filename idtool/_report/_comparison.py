@@ -9,13 +9,14 @@ imports the other's module to know the record.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 
 from idtool._data._dataset import Dataset
+from idtool._fit._result import Estimate
 from idtool._model._benchmodel import BenchModel
 from idtool._predict._amplitude import AmplitudeFor
 from idtool._predict._compare import PairPoint, tested_values
@@ -51,7 +52,7 @@ class FitToCompare(Protocol):
     @property
     def folder(self) -> Path | None: ...
     @property
-    def estimates(self) -> dict[str, Any]: ...
+    def estimates(self) -> Mapping[str, Estimate]: ...
     @property
     def warnings(self) -> list[str]: ...
     def draws(self, max_draws: int = 2000, seed: int = 0) -> Draws: ...
