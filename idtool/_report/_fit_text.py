@@ -106,6 +106,10 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
             "name": r.model.offset.name,
             "trace_parameters": [name for name, _, _ in r.model.offset.trace_params],
         },
+        "level": {
+            "name": r.model.level.name,
+            "parameters": [p.name for p in r.model.level.fit_params],
+        },
         "aic": r.aic,
         "bic": r.bic,
         "loglik": r.loglik,
@@ -239,7 +243,8 @@ def fit_report(run: FitRun) -> str:
         f"    dataset      {d.name} (sha256 {d.sha256[:12]}...), {d.n_traces} traces, "
         f"{d.n_blocks} block means of {d.block_size} samples",
         f"    model        {r.model.law.name} friction, {r.model.coupling.name} coupling, "
-        f"{r.model.actuator.name} actuator, {r.model.offset.name} load-cell offset",
+        f"{r.model.actuator.name} actuator, {r.model.offset.name} load-cell offset, "
+        f"{r.model.level.name} levels",
         f"    choice       {run.reason}",
         f"    noise        {r.model.noise.description} ({r.model.noise.name}), phi = {r.phi:.3f}, "
         f"innovation sigma = {r.sigma_n:.3g} N",
