@@ -229,7 +229,6 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
     )
     from idtool._model._coupling_sdof import sdof_detuning_n_m, sdof_loss_stiffness_n_m
     from idtool._model._laws import FRICTION_LAWS, AbstractFrictionLaw, Coulomb, Dahl, LuGre
-    from idtool._model._limits import coulomb_friction_ratio, dahl_small_lambda_friction_ratio
     from idtool._model._level_model import (
         LEVEL_MODELS,
         AbstractLevelModel,
@@ -237,6 +236,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
         RelaxingOnLevel,
         SteadyLevel,
     )
+    from idtool._model._limits import coulomb_friction_ratio, dahl_small_lambda_friction_ratio
     from idtool._model._noise import NOISE_MODELS, AbstractNoise
     from idtool._model._offset import OFFSETS, AbstractOffset, ConstantOffset, DriftingOffset
     from idtool._model._params import Param

@@ -162,8 +162,10 @@ def fit_model(
     """Fit one law, coupling, actuator, load-cell offset and level model to prepared data;
     see the module docstring. ``start_from``: a fit of a model this one nests (the slope
     actuator for the lag one, the constant offset for the drifting one, the constant
-    coupling for a saturating one, the steady levels for the relaxing or creeping ones): its optimum is the start, the new parameters where
-    this model reduces to that one (:attr:`Param.nested_at`), with no multi-start.
+    coupling for a saturating one, the steady levels for the relaxing or creeping ones):
+    its optimum is the start, the new parameters where this model reduces to that one
+    (:attr:`Param.nested_at`; each of :attr:`Param.nested_starts` in turn, the likeliest
+    end kept), with no multi-start.
     ``settings``: the user's fixed values, bounds, scales, starts and priors
     (:mod:`idtool._model._settings`)."""
     model = bench_model(data, law, coupling, noise, actuator, offset, settings, level)
@@ -198,7 +200,8 @@ def fit_model(
         for i, p in enumerate(model.params):
             if p.name not in prev and p.nested_starts:
                 zs = [zz.copy() for zz in zs for _ in p.nested_starts]
-                for zz, value in zip(zs, p.nested_starts * (len(zs) // len(p.nested_starts))):
+                values = p.nested_starts * (len(zs) // len(p.nested_starts))
+                for zz, value in zip(zs, values, strict=True):
                     zz[i] = p.internal(value)
         fits = []
         for zz in zs:  # ranked by likelihood: each settles its own phi

@@ -211,14 +211,9 @@ def fit_dataset(
         # the candidates' programs, compiled in the order the loop below needs them
         # while it fits the ones before (the first it compiles itself); the offset
         # models nest in the best actuator model, most often the simplest
-        plan = [
-            (lw, cp, ac, offsets[0], lv) for lw in laws for cp in couplings for ac in actuators
-        ]
+        plan = [(lw, cp, ac, offsets[0], lv) for lw in laws for cp in couplings for ac in actuators]
         plan += [
-            (lw, cp, actuators[0], of, lv)
-            for lw in laws
-            for cp in couplings
-            for of in offsets[1:]
+            (lw, cp, actuators[0], of, lv) for lw in laws for cp in couplings for of in offsets[1:]
         ]
         for names in plan[1:]:
             ahead.call(functools.partial(_compile_lm, data, names, noise, settings))
@@ -392,9 +387,7 @@ def drifting_levels(result: FitResult) -> tuple[str, ...]:
     return tuple(out)
 
 
-def _compile_lm(
-    data: FitData, names: tuple[str, str, str, str, str], noise: str, settings
-) -> None:
+def _compile_lm(data: FitData, names: tuple[str, str, str, str, str], noise: str, settings) -> None:
     """Compile the Levenberg-Marquardt program of the model ``names`` (law, coupling,
     actuator, offset, level)."""
     lw, cp, ac, of, lvl = names
