@@ -63,9 +63,7 @@ def _score(kind: str) -> dict:
         "inside": inside,
         "level": fit.model.level.name,
         "drift_warning": any(w.startswith(DRIFT) for w in fit.warnings),
-        "half_width": float(
-            np.mean([(p.ci95[1] - p.ci95[0]) / 2 for p in fit.predict(*MATRIX)])
-        ),
+        "half_width": float(np.mean([(p.ci95[1] - p.ci95[0]) / 2 for p in fit.predict(*MATRIX)])),
     }
     for name, value in truth.items():
         est = fit.estimates[name]

@@ -84,7 +84,7 @@ def test_friction_ratio_at_start_and_steady_state():
 def test_zero_rise_and_zero_creep_are_the_steady_model(clean):
     """Nested: the relaxing model at rise 0 and the creeping one at rate 0 predict the
     steady model's block means exactly, whatever the time constant."""
-    dataset, _, fit = clean
+    dataset, _, _ = clean
     data = prepare_fit_data(dataset, mains_hz=50.0, periods_per_block=2)
     steady = bench_model(data)
     z = steady.z0()
@@ -162,9 +162,7 @@ def test_fading_horn_chooses_the_relaxing_on_level_and_recovers_it(fading):
     # alone identify tau, and eq. R1 fits the truth's curve to 0.3% of the level, not
     # exactly (tolerance 25% of tau_eff, measured error in brackets in the final report)
     assert est.ci95[0] - 0.25 * tau < tau < est.ci95[1] + 0.25 * tau, (est, tau)
-    long = [
-        i for i, t in enumerate(truth.traces) if t.horn_on_s[1] - t.horn_on_s[0] > 2.0
-    ]
+    long = [i for i, t in enumerate(truth.traces) if t.horn_on_s[1] - t.horn_on_s[0] > 2.0]
     for i, r in zip(long, rises, strict=True):
         e = fit.estimates[f"on_rise[{dataset.traces[i].id}]"]
         # within its interval or 0.05 of it (the shape error again: 5% of the level)
@@ -225,7 +223,7 @@ def test_creeping_level_is_chosen_and_recovered():
 
 
 def test_fit_json_round_trip(fading, tmp_path):
-    dataset, _, fit = fading
+    _, _, fit = fading
     folder = fit.save(tmp_path / "fit")
     doc = json.loads((folder / "fit.json").read_text())
     assert doc["level"] == {
@@ -234,7 +232,7 @@ def test_fit_json_round_trip(fading, tmp_path):
         "trace_parameters": ["on_rise"],
     }
     assert doc["plateau_drift"]["modelled"]["model"] == "relaxing"
-    for i, tr in enumerate(doc["traces"]):
+    for tr in doc["traces"]:
         steady = tr["friction_ratio_steady"]
         fr0 = tr["friction_ratio"]["estimate"]
         assert steady["estimate"] == pytest.approx(min(fr0 * (1 + steady["on_rise"]), 1.0))

@@ -188,10 +188,9 @@ def load_stored_fit(folder: str | Path) -> StoredFit:
     alternates = {}
     for w in doc.get("coupling_laws", []):  # law/coupling/actuator/offset[/level] in "key"
         if "state_file" in w:
-            _, coupling, actuator, offset, *level = w["key"].split("/")
-            alt = stored(
-                coupling, actuator, offset, *(level or ["steady"]), folder / w["state_file"], {}
-            )
+            _, coupling, actuator, offset, *rest = w["key"].split("/")
+            level = rest[0] if rest else "steady"  # keys before the level models: 4 parts
+            alt = stored(coupling, actuator, offset, level, folder / w["state_file"], {})
             alternates[w["law"]] = (float(w["bic_weight"]), alt)
     return stored(
         doc["coupling"],
