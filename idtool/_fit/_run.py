@@ -99,7 +99,10 @@ MIN_LAW_WEIGHT = 1e-3
 
 
 def _key(law: str, coupling: str, actuator: str, offset: str, level: str) -> str:
-    return f"{law}/{coupling}/{actuator}/{offset}/{level}"
+    """A candidate's name: ``law/coupling/actuator/offset``, then ``/level`` unless the
+    levels are steady (so keys stay what they were before the level models)."""
+    key = f"{law}/{coupling}/{actuator}/{offset}"
+    return key if level == "steady" else f"{key}/{level}"
 
 
 def _better(multi: FitResult, nested: FitResult) -> FitResult:
