@@ -243,7 +243,9 @@ def test_fit_json_round_trip(fading, tmp_path):
     assert stored.model.level.name == "relaxing"
     for name in ("Kt", "mu", "on_relax_time_s"):
         assert stored.estimates[name].estimate == pytest.approx(fit.estimates[name].estimate)
-    (a,), (b,) = fit.predict(560.0, 0.6), stored.predict(560.0, 0.6)
-    assert a.median == pytest.approx(b.median, rel=1e-9)
+    pa, pb = fit.predict(560.0, 0.6), stored.predict(560.0, 0.6)
+    assert pa[0].median == pytest.approx(pb[0].median, rel=1e-9)
+    (note,) = with_code(pb.warnings, "drift_modelled")  # the predictions say which FR
+    assert "cold horn" in note and "steady state" in note
     text = (folder / "report.txt").read_text()
     assert "at the window's start" in text and "at steady state" in text

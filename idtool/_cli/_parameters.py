@@ -41,8 +41,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "parameters",
         help="write a model's parameter table (PEtab-like) for 'idtool fit --parameters'",
         description="The shared parameters of a friction law, coupling law, actuator "
-        "model and level model, one row each with idtool's unit, bounds and scale, every one estimated: "
-        "a parameter table to edit (fix a value with estimate 0 and nominalValue, narrow "
+        "model and level model, one row each with idtool's unit, bounds and scale, every "
+        "one estimated: a parameter table to edit (fix a value with estimate 0 and nominalValue, narrow "
         "the bounds, give a start or a prior) and pass to 'idtool fit --parameters'.",
     )
     add_law_argument(p)
