@@ -42,8 +42,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="write a model's parameter table (PEtab-like) for 'idtool fit --parameters'",
         description="The shared parameters of a friction law, coupling law, actuator "
         "model and level model, one row each with idtool's unit, bounds and scale, every "
-        "one estimated: a parameter table to edit (fix a value with estimate 0 and nominalValue, narrow "
-        "the bounds, give a start or a prior) and pass to 'idtool fit --parameters'.",
+        "one estimated: a parameter table to edit (fix a value with estimate 0 and "
+        "nominalValue, narrow the bounds, give a start or a prior) and pass to 'idtool fit "
+        "--parameters'.",
     )
     add_law_argument(p)
     p.add_argument(
