@@ -13,7 +13,7 @@ from idtool._errors import IdtoolError
 from idtool._fit._parameter_table import parse_fix, read_parameter_table
 from idtool._fit._run import fit_dataset
 from idtool._fit._store import load_stored_fit
-from idtool._model._names import DEFAULT_COUPLING
+from idtool._model._names import BY_DESIGN
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._settings import ParameterSetting
 from idtool._predict._validation import select_traces
@@ -26,7 +26,7 @@ def fit(
     dataset: Dataset | str | os.PathLike,
     *,
     law: str = "dahl",
-    coupling: str = DEFAULT_COUPLING,
+    coupling: str = BY_DESIGN,
     noise: str = DEFAULT_NOISE,
     seed: int = 0,
     starts: int = 8,
@@ -48,8 +48,11 @@ def fit(
     Args:
         dataset: a :class:`~idtool.Dataset` or the path of a v1 dataset folder.
         law: friction law, a name of :data:`idtool.FRICTION_LAWS` ("dahl", "lugre").
-        coupling: a name of :data:`idtool.COUPLINGS`, or "auto" (fit every coupling
-            law, keep the lowest BIC). Default "power-limited", the paper's finding.
+        coupling: a name of :data:`idtool.COUPLINGS`, "auto" (fit every coupling law,
+            keep the lowest BIC) or "by-design" (default): "power-limited", the paper's
+            finding, on a dataset pulled at one speed; where some load and amplitude
+            were pulled at two or more speeds (which pin Kt whatever the law),
+            "power-limited" and "load-power", the lower BIC kept.
         noise: a name of :data:`idtool.NOISE_MODELS` (default "ar1").
         seed: seeds the multi-start points; the same seed gives the same fit.
         starts: multi-start points.

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from idtool._atomic import refuse_existing
 from idtool._cli._args import add_law_argument, load_numerics, registry_names
-from idtool._model._names import DEFAULT_COUPLING
+from idtool._model._names import BY_DESIGN
 
 __all__ = ["register"]
 
@@ -81,11 +81,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_law_argument(p)
     p.add_argument(
         "--coupling",
-        choices=registry_names("COUPLINGS", "auto"),
+        choices=registry_names("COUPLINGS", "auto", BY_DESIGN),
         metavar="LAW",
-        default=DEFAULT_COUPLING,
-        help=f"coupling law: %(choices)s (default {DEFAULT_COUPLING}, the paper's finding); "
-        "auto fits every coupling law and keeps the lowest BIC",
+        default=BY_DESIGN,
+        help="coupling law: %(choices)s. auto fits every coupling law and keeps the "
+        f"lowest BIC; {BY_DESIGN} (default) fits power-limited (the paper's finding), and "
+        "also load-power where some load and amplitude were pulled at two or more speeds "
+        "(they pin Kt whatever the law; the lower BIC is kept)",
     )
     p.add_argument(
         "--actuator",

@@ -32,6 +32,7 @@ import numpy as np
 
 from idtool._data._blocks import FitData, prepare_fit_data
 from idtool._data._dataset import Dataset
+from idtool._data._design import speed_resolved_pairs
 from idtool._data._mains import resolve_mains
 from idtool._diagnostic import Diagnostic
 from idtool._errors import IdtoolError
@@ -54,7 +55,7 @@ from idtool._model._benchmodel import bench_model, shared_params_of
 from idtool._model._coupling import COUPLINGS
 from idtool._model._laws import FRICTION_LAWS
 from idtool._model._level_model import LEVEL_MODELS
-from idtool._model._names import DEFAULT_COUPLING
+from idtool._model._names import BY_DESIGN, DEFAULT_COUPLING, SPEED_RESOLVED_COUPLINGS
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._offset import OFFSETS
 from idtool._model._params import Param
@@ -157,7 +158,7 @@ def coupling_weights(candidates: dict[str, FitResult]) -> dict[str, LawWeight]:
 def fit_dataset(
     dataset: Dataset,
     law: str = "dahl",
-    coupling: str = DEFAULT_COUPLING,
+    coupling: str = BY_DESIGN,
     seed: int = 0,
     n_starts: int = 8,
     compare_laws: bool = False,
@@ -174,7 +175,10 @@ def fit_dataset(
     """Fit ``dataset``; ``law``, ``coupling``, ``noise``, ``actuator``, ``offset`` and
     ``level`` by registered name (:data:`FRICTION_LAWS`, :data:`COUPLINGS`,
     :data:`NOISE_MODELS`, :data:`ACTUATORS`, :data:`OFFSETS`, :data:`LEVEL_MODELS`);
-    ``coupling="auto"`` fits every registered coupling law, ``actuator="auto"`` (default)
+    ``coupling="by-design"`` (default) fits the power limit, or on a dataset that pulled
+    a load and amplitude at two or more speeds the power limit and the load-power law
+    (:data:`SPEED_RESOLVED_COUPLINGS`, BIC chooses; :mod:`idtool._data._design`),
+    ``coupling="auto"`` every registered coupling law, ``actuator="auto"`` (default)
     every actuator model, ``offset="auto"`` (default) every offset model on the best
     actuator, ``level="auto"`` (default) the steady levels and, where the best fit's
     plateaus drift, the relaxing ON level or the creeping level nested in it (module
@@ -201,7 +205,12 @@ def fit_dataset(
     laws: tuple[str, ...] = (law,)
     if compare_laws:
         laws = tuple(n for n in FRICTION_LAWS if FRICTION_LAWS.get(n).fit_params)
-    couplings = COUPLINGS.names() if coupling == "auto" else (coupling,)
+    pairs = speed_resolved_pairs(data.op_load_n, data.op_alpha, data.op_speed_m_s)
+    couplings: tuple[str, ...]
+    if coupling == BY_DESIGN:
+        couplings = SPEED_RESOLVED_COUPLINGS if pairs else (DEFAULT_COUPLING,)
+    else:
+        couplings = COUPLINGS.names() if coupling == "auto" else (coupling,)
     single_load = np.unique(data.normal_load_n).size == 1
     if coupling == "auto" and single_load:
         couplings = ("constant",)
@@ -327,7 +336,7 @@ def fit_dataset(
                 )
             )
         best = candidates[best_key] = dataclasses.replace(
-            best, notes=[*best.notes, kt_through_coupling(best.model.coupling.name)]
+            best, notes=[*best.notes, kt_through_coupling(best.model.coupling.name, pairs)]
         )
         if run_warnings:  # for the fit report
             best = candidates[best_key] = dataclasses.replace(
@@ -346,6 +355,12 @@ def fit_dataset(
                 f"; the steady fit's plateaus drift, so the {' and '.join(tried)} level "
                 f"model{'s were' if len(tried) > 1 else ' was'} tried, nested in it"
             )
+        if coupling == BY_DESIGN and pairs:
+            reason += (
+                f"; {len(pairs)} load and amplitude pair(s) pulled at two or more speeds, "
+                "which pin Kt whatever the coupling law: the power limit and the load-power "
+                "law were tried"
+            )
         if coupling == "auto" and single_load:
             reason += (
                 "; all traces share one normal load, so the power-limited coupling cannot be "
@@ -357,23 +372,36 @@ def fit_dataset(
         return FitRun(data, best, candidates, reason, seed, profiles, alternates)
 
 
-def kt_through_coupling(law: str) -> str:
+def kt_through_coupling(law: str, pairs: Sequence[tuple[float, float]] = ()) -> str:
     """What Kt's interval rests on (a fact of the experiment, for every fit's notes).
 
     The friction ratio depends on the velocity ratio ``VR = v / (a w)`` and on
     ``Lambda = Kt a / (mu N)`` alone (notes §4), and the slip amplitude ``a`` is not
     measured: along any one measured FR, ``a`` can run from its Coulomb limit
     (``Lambda -> inf``) to its creep limit (``Lambda -> 0``) with Kt from infinity to 0.
-    Only the coupling law's shape across loads and amplitudes ties them, so a law that
-    fits the levels equally well can put Kt elsewhere (3x off on simulated benches
-    whose coupling saturates under a ceiling of another shape, with no misfit seen).
+    At one pull speed only the coupling law's shape across loads and amplitudes ties
+    them, so a law that fits the levels equally well can put Kt elsewhere (3x off on
+    simulated benches whose coupling saturates under a ceiling of another shape, with no
+    misfit seen). ``pairs``: the (load, amplitude) pairs pulled at two or more speeds
+    (:func:`idtool._data._design.speed_resolved_pairs`), each of which gives its ``a`` and
+    Kt whatever the law (0.95-0.99x truth on those benches).
     """
+    if pairs:
+        where = ", ".join(f"{n:g} N at {a:.0%}" for n, a in pairs[:4])
+        where += f" and {len(pairs) - 4} more" if len(pairs) > 4 else ""
+        return (
+            f"Kt is pinned by pulls at two or more speeds ({where}): at one slip amplitude "
+            "two velocity ratios give the amplitude and Kt whatever the coupling law, so "
+            f"the {law} law only carries them between loads and amplitudes, and a wrong "
+            "shape shows as misfit rather than as a shifted Kt"
+        )
     return (
         f"Kt is read through the {law} coupling law: the slip amplitude is not "
         "measured, and the friction ratio depends on Kt only through Lambda = Kt a / "
         "(mu N), so Kt's interval holds if the law's dependence on load and amplitude "
-        "is right. A vibrometer reading of the slip amplitude at each load would pin Kt "
-        "without it"
+        "is right. Pulling each load and amplitude at two speeds (e.g. half and twice "
+        "this one) would pin Kt without it, as would a vibrometer reading of the slip "
+        "amplitude"
     )
 
 

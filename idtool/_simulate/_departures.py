@@ -49,7 +49,14 @@ from idtool._data._example import example_params_path
 from idtool._errors import IdtoolError
 from idtool._simulate._params import BenchParams
 
-__all__ = ["ALL_KINDS", "DEPARTURE_KINDS", "DRIFT_KINDS", "SHAPE_KINDS", "departure_params"]
+__all__ = [
+    "ALL_KINDS",
+    "DEPARTURE_KINDS",
+    "DESIGNS",
+    "DRIFT_KINDS",
+    "SHAPE_KINDS",
+    "departure_params",
+]
 
 # The departures the fit's model options cover (the coverage studies score these).
 DEPARTURE_KINDS = ("clean", "scatter", "actuator", "mains60", "drift", "coupling", "all")
@@ -89,6 +96,18 @@ TRUTH_ONLY_COUPLING = {"law": "load_exponential", "gain": 0.032, "load_scale_n":
 # less at 270 N and 19% more at 670 N, where its ceiling falls more slowly with the load.
 CEILING_COUPLING = {"law": "tanh_ceiling", "gain": 0.03, "ceiling_load_n": 30.0}
 
+# The experiment matrices the presets run on (overrides of the example's "experiments").
+# "paper": the example's (3 loads x 2 amplitudes x ON 0.5/1/2/2.5 s at 25 mm/s). The
+# fit reads Kt there only through the coupling law's shape (idtool._fit._run,
+# kt_through_coupling). "two-speed": the same 24 traces as 3 x 2 x ON 1/2.5 s at half
+# and twice the paper's speed: two velocity ratios at one slip amplitude give that
+# amplitude and Kt at each load and amplitude whatever the coupling law (VR 0.16 and 0.63
+# at the example's 0.63 um, 450 N; both below 1, where FR depends on VR and Lambda).
+DESIGNS: dict[str, dict[str, Any]] = {
+    "paper": {},
+    "two-speed": {"on_durations_s": [1.0, 2.5], "pull_speed_m_s": [0.0125, 0.05]},
+}
+
 # Half-widths of the seeded truth's log-uniform ranges around the example's values: mu
 # 0.27-0.33, Kt 0.67e9-1.5e9 N/m, gain +-10%, load scales +-20%. Narrow enough that Lambda
 # stays in 1-30 (Kt identifiable) and FR in 0.1-0.9 at every operating point of the matrix.
@@ -102,22 +121,27 @@ TRUTH_LOG_HALF_WIDTH = {
 _TRUTH_STREAM = 0x7472757468  # "truth"
 
 
-def departure_params(kind: str, seed: int) -> BenchParams:
+def departure_params(kind: str, seed: int, design: str = "paper") -> BenchParams:
     """Simulator parameters with the departure ``kind`` (one of :data:`DEPARTURE_KINDS`,
-    :data:`DRIFT_KINDS` or :data:`SHAPE_KINDS`).
+    :data:`DRIFT_KINDS` or :data:`SHAPE_KINDS`) on the experiment matrix ``design`` (one
+    of :data:`DESIGNS`: ``"paper"``, the example's 24 traces at one pull speed, or
+    ``"two-speed"``, 24 traces at two).
 
     ``seed`` (an integer >= 0) draws the true mu, Kt, coupling gain and load scale
     (module docstring); simulate with ``idtool.simulate_bench(params, seed)``.
 
     Raises:
-        IdtoolError: an unknown ``kind`` or a bad ``seed``.
+        IdtoolError: an unknown ``kind`` or ``design``, or a bad ``seed``.
     """
     if kind not in DEPARTURE_KINDS + DRIFT_KINDS + SHAPE_KINDS:
         kinds = ", ".join(DEPARTURE_KINDS + DRIFT_KINDS + SHAPE_KINDS)
         raise IdtoolError(f"departure kind {kind!r}: use one of {kinds}")
+    if design not in DESIGNS:
+        raise IdtoolError(f"design {design!r}: use one of {', '.join(DESIGNS)}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise IdtoolError(f"seed {seed!r}: give an integer >= 0")
     p: dict[str, Any] = json.loads(example_params_path().read_text())
+    p["experiments"] |= DESIGNS[design]
     truth = _truth_factors(seed)
     p["contact"]["friction_coefficient"] *= truth["friction_coefficient"]
     p["contact"]["contact_stiffness_n_m"] *= truth["contact_stiffness_n_m"]

@@ -184,16 +184,26 @@ class FadingParams:
 
 @dataclasses.dataclass(frozen=True)
 class ExperimentParams:
-    """The matrix (loads [N] x amplitude fractions x ON durations [s] x repeats) and timing."""
+    """The matrix (loads [N] x amplitude fractions x ON durations [s] x pull speeds [m/s]
+    x repeats) and timing. ``pull_speed_m_s`` is one speed or several: pulls at two or
+    more speeds at each load and amplitude pin Kt whatever the coupling law (docs/model.md,
+    "What Kt rests on")."""
 
     normal_loads_n: tuple[float, ...]
     amplitude_fractions: tuple[float, ...]
     on_durations_s: tuple[float, ...]
-    pull_speed_m_s: float
+    pull_speed_m_s: float | tuple[float, ...]
     sliding_before_s: float
     sliding_after_s: float
     sample_rate_hz: float
     repeats: int
+
+    @property
+    def pull_speeds_m_s(self) -> tuple[float, ...]:
+        """The pull speeds [m/s] of the matrix, the first the reference speed (of
+        :func:`idtool._simulate._simulate.true_friction_ratio` without a speed)."""
+        v = self.pull_speed_m_s
+        return v if isinstance(v, tuple) else (v,)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -316,7 +326,11 @@ def _actuator(section: Mapping[str, Any]) -> ActuatorParams:
 def _experiments(section: Mapping[str, Any]) -> ExperimentParams:
     lists = ("normal_loads_n", "amplitude_fractions", "on_durations_s")
     values: dict[str, Any] = {k: tuple(float(x) for x in section[k]) for k in lists}
-    values.update({k: float(v) for k, v in section.items() if k not in lists})
+    values.update({k: float(v) for k, v in section.items() if k not in (*lists, "pull_speed_m_s")})
+    speed = section["pull_speed_m_s"]
+    values["pull_speed_m_s"] = (
+        tuple(float(x) for x in speed) if isinstance(speed, list | tuple) else float(speed)
+    )
     values["repeats"] = int(section["repeats"])
     return ExperimentParams(**values)
 

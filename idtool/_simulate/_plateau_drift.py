@@ -151,7 +151,7 @@ def on_level_over_time_n(params: BenchParams, trace: TraceTruth, time_s: np.ndar
         trace.friction_coefficient,
         params.contact.contact_stiffness_n_m,
         trace.normal_load_n,
-        params.experiments.pull_speed_m_s,
+        trace.pull_speed_m_s,
         params.rig.vibration_frequency_hz,
         trace.slip_amplitude_m,
         fading.fade_fraction,

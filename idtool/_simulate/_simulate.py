@@ -76,16 +76,20 @@ _PAD_SAMPLES = 4096
 
 
 def experiment_plan(params: BenchParams) -> tuple[OperatingPoint, ...]:
-    """The matrix in order: loads, then amplitudes, then ON durations, then repeats."""
+    """The matrix in order: loads, then amplitudes, then ON durations, then pull speeds,
+    then repeats. A trace's id names its speed [mm/s] only when there are several."""
     e = params.experiments
+    speeds = e.pull_speeds_m_s
     points = []
     for load in e.normal_loads_n:
         for alpha in e.amplitude_fractions:
             for duration in e.on_durations_s:
-                for k in range(e.repeats):
-                    name = f"N{load:g}_A{alpha * 100:.4g}_T{duration:g}"
-                    name += f"_r{k + 1}" if e.repeats > 1 else ""
-                    points.append(OperatingPoint(name, load, alpha, duration))
+                for v in speeds:
+                    for k in range(e.repeats):
+                        name = f"N{load:g}_A{alpha * 100:.4g}_T{duration:g}"
+                        name += f"_V{v * 1000:.4g}" if len(speeds) > 1 else ""
+                        name += f"_r{k + 1}" if e.repeats > 1 else ""
+                        points.append(OperatingPoint(name, load, alpha, duration, v))
     return tuple(points)
 
 
@@ -100,10 +104,10 @@ def operating_point(
     """FR, slip amplitude [m], VR and Lambda of the contact model at one operating point.
 
     ``load_n`` [N], ``alpha`` the amplitude fraction [-], ``speed_m_s`` the pull speed
-    [m/s] (default: the experiments'). Without pull-to-pull scatter.
+    [m/s] (default: the experiments' first). Without pull-to-pull scatter.
     """
     c, rig = params.contact, params.rig
-    v = params.experiments.pull_speed_m_s if speed_m_s is None else speed_m_s
+    v = params.experiments.pull_speeds_m_s[0] if speed_m_s is None else speed_m_s
     coupling = params.coupling.model(rig.max_amplitude_m)
     law = dahl_at_load(c.friction_coefficient, jnp.asarray(c.contact_stiffness_n_m), load_n)
     w = 2.0 * math.pi * rig.vibration_frequency_hz
@@ -130,7 +134,7 @@ def true_friction_ratio(
     """The true FR [-] at any operating point, without pull-to-pull scatter.
 
     ``load_n`` [N], ``amplitude_fraction`` [-] in [0, 1], ``speed_m_s`` the pull speed
-    [m/s] (default: the experiments'). This is the curve a fit should recover, also at
+    [m/s] (default: the experiments' first). This is the curve a fit should recover, also at
     operating points the experiments did not measure (the truth-only coupling included).
     """
     return operating_point(params, load_n, amplitude_fraction, speed_m_s)["friction_ratio"]
@@ -290,6 +294,7 @@ def _simulate_trace(
         offset_drift_n_s=drift,
         startup_end_s=startup_end,
         level_creep_per_s=params.contact.level_creep_per_s,
+        pull_speed_m_s=point.pull_speed_m_s,
     )
     truth = dataclasses.replace(
         truth,
@@ -307,12 +312,13 @@ def _simulate_trace(
 
 def _operating_point_truths(
     params: BenchParams, plan: tuple[OperatingPoint, ...]
-) -> dict[tuple[float, float], OperatingPointTruth]:
-    """The contact model at each distinct (load, amplitude) of the plan, in plan order."""
-    out: dict[tuple[float, float], OperatingPointTruth] = {}
-    v = params.experiments.pull_speed_m_s
+) -> dict[tuple[float, float, float], OperatingPointTruth]:
+    """The contact model at each distinct (load, amplitude, speed) of the plan, in plan
+    order."""
+    out: dict[tuple[float, float, float], OperatingPointTruth] = {}
     for point in plan:
-        key = (point.normal_load_n, point.amplitude_fraction)
+        v = point.pull_speed_m_s
+        key = (point.normal_load_n, point.amplitude_fraction, v)
         if key not in out:
             op = operating_point(params, *key)
             vr = op["velocity_ratio"]
@@ -354,7 +360,7 @@ def simulate_bench(
     files: dict[str, bytes] = {}
     entries, truths = [], []
     for point, rng in zip(plan, np.random.default_rng(seed).spawn(len(plan)), strict=True):
-        op = points[(point.normal_load_n, point.amplitude_fraction)]
+        op = points[(point.normal_load_n, point.amplitude_fraction, point.pull_speed_m_s)]
         truth, time_s, force_n, flags = _simulate_trace(p, point, op, rng)
         file = f"traces/{point.id}{suffix}"
         files[file] = render_table(file, time_s, force_n, flags)
@@ -364,7 +370,7 @@ def simulate_bench(
                 file,
                 point.normal_load_n,
                 point.amplitude_fraction,
-                p.experiments.pull_speed_m_s,
+                point.pull_speed_m_s,
             )
         )
         truths.append(truth)

@@ -13,12 +13,14 @@ __all__ = ["BenchTruth", "OperatingPoint", "OperatingPointTruth", "TraceTruth"]
 
 @dataclasses.dataclass(frozen=True)
 class OperatingPoint:
-    """One trace of the matrix: its id, load [N], amplitude fraction, ON duration [s]."""
+    """One trace of the matrix: its id, load [N], amplitude fraction, ON duration [s],
+    pull speed [m/s]."""
 
     id: str
     normal_load_n: float
     amplitude_fraction: float
     on_duration_s: float
+    pull_speed_m_s: float
 
 
 @dataclasses.dataclass(frozen=True)
@@ -51,6 +53,7 @@ class TraceTruth:
         level_creep_per_s: relative creep of mu with sliding time [1/s]: the levels are
             ``off_force_n`` and ``on_force_n`` times ``1 + level_creep_per_s * (t -
             startup_s)``.
+        pull_speed_m_s: this trace's pull speed [m/s].
     """
 
     id: str
@@ -75,6 +78,7 @@ class TraceTruth:
     startup_end_s: float
     on_force_end_n: float | None = None
     level_creep_per_s: float = 0.0
+    pull_speed_m_s: float = 0.0
 
 
 @dataclasses.dataclass(frozen=True)
