@@ -10,8 +10,10 @@ defaults (until converged), then score against the truth:
   95% band, from the fit's covariance and from the posterior;
 * Kt and mu inside their 95% intervals, the fit's and the posterior's, and their
   relative errors; the mean half-width of the FR band at the paper's matrix;
-* which warnings fired (plateau drift, misfit), and how often the fit chose the
-  load-power coupling law (column l-p; tried by default on a two-speed design).
+* which warnings fired (plateau drift, misfit), how often the fit chose the load-power
+  coupling law (column l-p; tried by default on a two-speed design), and which level
+  model it chose (steady, or the relaxing ON level or creeping level it tries where the
+  plateaus drift).
 
 ``--design two-speed`` runs every kind on the matrix pulled at 12.5 and 50 mm/s (24
 traces, idtool._simulate._departures.DESIGNS), where Kt does not rest on the coupling
@@ -19,7 +21,9 @@ law's shape; held-out FR is scored at the paper's 25 mm/s, between the two.
 
 Run: ``make study`` (3 seeds per kind; about 10 minutes on 2 cores for the covered kinds,
 and up to 10 more per fading-horn bench, whose chains run to the sampler's time bound) or
-``.venv/bin/python benchmarks/study_departures.py --seeds 1 --kinds coupling,fading``.
+``.venv/bin/python benchmarks/study_departures.py --seeds 1 --kinds coupling,fading``;
+``--fit-only`` skips the sampler (its columns then read ``-``): the fits' coverage in
+minutes, e.g. ``--kinds fading,creep --seeds 3 --fit-only``.
 The per-kind table it prints is what a closing note quotes. A dataset whose fit or
 sampling fails with idtool's own error is reported and counted, not fatal; every row is
 also appended to ``--rows`` (JSON lines) as it finishes.
@@ -43,7 +47,7 @@ MATRIX = ([270.0, 450.0, 670.0], [0.5, 0.7])
 HELD_OUT_SPEED = 0.025
 
 
-def score(kind: str, seed: int, design: str = "paper") -> dict:
+def score(kind: str, seed: int, design: str = "paper", sample: bool = True) -> dict:
     import idtool
     from idtool._errors import IdtoolError
     from idtool._fit._plateau_drift import DRIFT
@@ -80,6 +84,11 @@ def score(kind: str, seed: int, design: str = "paper") -> dict:
         out[f"fit_{name}_one_sided"] = bool(est.one_sided)  # "> lo" or "< hi"
     out["drift_warning"] = any(w.startswith(DRIFT) for w in fit.warnings)
     out["misfit_warning"] = any(w.startswith(MISFIT) for w in fit.warnings)
+    out["level"] = fit.model.level.name
+    at_matrix = fit.predict(*MATRIX, HELD_OUT_SPEED)
+    out["half_width"] = float(np.mean([(p.ci95[1] - p.ci95[0]) / 2 for p in at_matrix]))
+    if not sample:
+        return out
 
     t0 = time.perf_counter()
     try:
@@ -103,6 +112,22 @@ def score(kind: str, seed: int, design: str = "paper") -> dict:
     return out
 
 
+def _frac(rs: list[dict], key: str, totals: dict[str, list]) -> str:
+    """``hits/count`` of a boolean column over rows ``rs`` (``-`` where it is missing)."""
+    if any(key not in r for r in rs):
+        return "-"
+    flat = np.concatenate([np.atleast_1d(r[key]) for r in rs])
+    totals.setdefault(key, []).extend(flat.tolist())
+    return f"{int(flat.sum())}/{flat.size}"
+
+
+def _mean(rs: list[dict], key: str, fmt: str, fn=np.mean) -> str:
+    """``fn`` of a numeric column over rows ``rs`` formatted, ``-`` where it is missing."""
+    if any(key not in r for r in rs):
+        return "-"
+    return format(fn([r[key] for r in rs]), fmt)
+
+
 def table(rows: list[dict]) -> None:
     for r in rows:
         if "failed" in r:
@@ -113,7 +138,7 @@ def table(rows: list[dict]) -> None:
         f"{'kind':9}{'conv':>6}{'steps':>7}{'s':>6}{'tau':>6} {'slowest':15}"
         f"{'FR fit':>8}{'FR post':>8}{'Kt fit':>7}{'Kt post':>8}{'mu fit':>7}{'mu post':>8}"
         f"{'Kt err':>8}{'mu err':>8}{'Kt dec':>7}{'Kt 1s':>6}{'hw':>7}{'drift':>6}{'misfit':>7}"
-        f"{'l-p':>5}"
+        f"{'l-p':>5}  levels"
     )
     print(head)
     totals: dict[str, list] = {}
@@ -122,24 +147,26 @@ def table(rows: list[dict]) -> None:
         n = len(rs)
 
         def frac(key: str, rs=rs) -> str:
-            flat = np.concatenate([np.atleast_1d(r[key]) for r in rs])
-            totals.setdefault(key, []).extend(flat.tolist())
-            return f"{int(flat.sum())}/{flat.size}"
+            return _frac(rs, key, totals)
 
-        slowest = max(rs, key=lambda r: r["tau"])
+        sampled = all("tau" in r for r in rs)
+        slowest = max(rs, key=lambda r: r["tau"]) if sampled else {"tau": "-", "slowest": "-"}
+        post_err = [abs(r.get("post_Kt_err", r["fit_Kt_err"])) for r in rs]
+        post_mu_err = [abs(r.get("post_mu_err", r["fit_mu_err"])) for r in rs]
+        decades = [max(r["fit_Kt_decades"], r.get("post_Kt_decades", 0.0)) for r in rs]
         print(
-            f"{kind:9}{frac('converged'):>6}{np.mean([r['steps'] for r in rs]):7.0f}"
-            f"{np.max([r['sample_s'] for r in rs]):6.0f}{slowest['tau']:6.0f} "
+            f"{kind:9}{frac('converged'):>6}{_mean(rs, 'steps', '7.0f'):>7}"
+            f"{_mean(rs, 'sample_s', '6.0f', np.max):>6}"
+            f"{format(slowest['tau'], '6.0f') if sampled else '-':>6} "
             f"{slowest['slowest']:15}{frac('fit_fr'):>8}{frac('post_fr'):>8}"
             f"{frac('fit_Kt'):>7}{frac('post_Kt'):>8}{frac('fit_mu'):>7}{frac('post_mu'):>8}"
-            f"{np.mean([abs(r['post_Kt_err']) for r in rs]):8.1%}"
-            f"{np.mean([abs(r['post_mu_err']) for r in rs]):8.2%}"
-            f"{max(max(r['fit_Kt_decades'], r['post_Kt_decades']) for r in rs):7.2f}"
+            f"{np.mean(post_err):8.1%}{np.mean(post_mu_err):8.2%}{max(decades):7.2f}"
             f"{sum(r.get('fit_Kt_one_sided', False) for r in rs):>4}/{n}"
             f"{np.mean([r['half_width'] for r in rs]):7.4f}"
             f"{sum(r['drift_warning'] for r in rs):>4}/{n}"
             f"{sum(r['misfit_warning'] for r in rs):>5}/{n}"
             f"{sum(r.get('coupling') == 'load-power' for r in rs):>3}/{n}"
+            f"  {','.join(r['level'] for r in rs)}"
         )
     print("overall: " + ", ".join(f"{k} {np.mean(v):.0%}" for k, v in totals.items()))
 
@@ -157,6 +184,9 @@ def main() -> None:
         choices=list(DESIGNS),
         help="the experiment matrix (idtool._simulate._departures.DESIGNS; default paper)",
     )
+    parser.add_argument(
+        "--fit-only", action="store_true", help="score the fits only, without sampling"
+    )
     args = parser.parse_args()
     started = time.perf_counter()
     rows = []
@@ -166,12 +196,21 @@ def main() -> None:
         k = every.index(kind)  # the kind's seeds whatever else runs
         for s in range(1, args.seeds + 1):
             # every dataset its own seed (kinds sharing seeds would share noise draws)
-            r = score(kind, 100 * k + s, args.design)
+            r = score(kind, 100 * k + s, args.design, sample=not args.fit_only)
             rows.append(r)
             with open(args.rows, "a") as f:
                 f.write(json.dumps(r, default=float) + "\n")
             if "failed" in r:
                 print(f"  {kind} seed {r['seed']}: FAILED {r['failed']}", flush=True)
+                continue
+            if args.fit_only:
+                print(
+                    f"  {kind} seed {r['seed']}: fit {r['fit_s']:.0f} s, FR fit "
+                    f"{sum(r['fit_fr'])}/6, Kt {r['fit_Kt']}, mu {r['fit_mu']}, half-width "
+                    f"{r['half_width']:.4f}, levels {r['level']}, drift warning "
+                    f"{r['drift_warning']}",
+                    flush=True,
+                )
                 continue
             print(
                 f"  {kind} seed {r['seed']}: converged {r['converged']} in {r['steps']} steps "

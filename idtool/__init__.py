@@ -46,6 +46,11 @@ _LAZY = {
     "LagActuator": "idtool._model._actuator",
     "SlopeActuator": "idtool._model._actuator",
     "OFFSETS": "idtool._model._offset",
+    "LEVEL_MODELS": "idtool._model._level_model",
+    "AbstractLevelModel": "idtool._model._level_model",
+    "SteadyLevel": "idtool._model._level_model",
+    "RelaxingOnLevel": "idtool._model._level_model",
+    "CreepingLevel": "idtool._model._level_model",
     "AbstractOffset": "idtool._model._offset",
     "ConstantOffset": "idtool._model._offset",
     "DriftingOffset": "idtool._model._offset",
@@ -107,12 +112,14 @@ __all__ = [
     "ACTUATORS",
     "COUPLINGS",
     "FRICTION_LAWS",
+    "LEVEL_MODELS",
     "NOISE_MODELS",
     "OFFSETS",
     "SEED_FIGURES",
     "AbstractActuator",
     "AbstractCoupling",
     "AbstractFrictionLaw",
+    "AbstractLevelModel",
     "AbstractNoise",
     "AbstractOffset",
     "AmplitudeFor",
@@ -124,6 +131,7 @@ __all__ = [
     "ConstantCoupling",
     "ConstantOffset",
     "Coulomb",
+    "CreepingLevel",
     "CycleAverage",
     "Dahl",
     "Dataset",
@@ -143,9 +151,11 @@ __all__ = [
     "Prediction",
     "Predictions",
     "Prior",
+    "RelaxingOnLevel",
     "Rig",
     "SdofCoupling",
     "SlopeActuator",
+    "SteadyLevel",
     "Trace",
     "Transducer",
     "TransducerSpec",
@@ -219,6 +229,13 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
     )
     from idtool._model._coupling_sdof import sdof_detuning_n_m, sdof_loss_stiffness_n_m
     from idtool._model._laws import FRICTION_LAWS, AbstractFrictionLaw, Coulomb, Dahl, LuGre
+    from idtool._model._level_model import (
+        LEVEL_MODELS,
+        AbstractLevelModel,
+        CreepingLevel,
+        RelaxingOnLevel,
+        SteadyLevel,
+    )
     from idtool._model._limits import coulomb_friction_ratio, dahl_small_lambda_friction_ratio
     from idtool._model._noise import NOISE_MODELS, AbstractNoise
     from idtool._model._offset import OFFSETS, AbstractOffset, ConstantOffset, DriftingOffset

@@ -48,6 +48,7 @@ CODES = {
     "drift_on": "the ON level drifts within its plateaus (a fading horn)",
     "drift_off": "the OFF level drifts within its plateaus (a creeping level)",
     "drift_creep": "the fitted offset drifts grow with the load (a creeping level)",
+    "drift_modelled": "a level model follows the levels' drift (relaxing ON or creeping level)",
     "coupling_laws": "the coupling laws fit comparably or disagree",
     "detuning": "the sdof horn's detuning",
     "data": "what the data and their blocks say (mains, sample rate, traces)",
@@ -61,7 +62,14 @@ CODES = {
 
 # The codes a report raises as red banners before anything else.
 BANNER_CODES = frozenset(
-    {"misfit_levels", "misfit_operating_points", "drift_on", "drift_off", "drift_creep"}
+    {
+        "misfit_levels",
+        "misfit_operating_points",
+        "drift_on",
+        "drift_off",
+        "drift_creep",
+        "drift_modelled",
+    }
 )
 
 

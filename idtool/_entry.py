@@ -41,6 +41,7 @@ def fit(
     variability: bool = True,
     actuator: str = "auto",
     offset: str = "auto",
+    level: str = "auto",
     progress: Callable[[str], None] | None = None,
     traces: str | Sequence[str] | None = None,
     fix: Mapping[str, float] | None = None,
@@ -76,6 +77,13 @@ def fit(
         offset: the load-cell offset within a trace, a name of :data:`idtool.OFFSETS`
             ("constant"; "drift": a linear drift per trace), or "auto" (default: both,
             the lower BIC kept).
+        level: how the friction levels move within their plateaus, a name of
+            :data:`idtool.LEVEL_MODELS` ("steady"; "relaxing": the ON level relaxes
+            from its cold-horn value with a time constant, FR then reported at the
+            window's start and at steady state; "creeping": the friction grows in
+            proportion to itself through the pull), or "auto" (default: steady, and
+            the others tried, nested in it, only where its plateaus drift; the lower
+            BIC kept).
         progress: called with a line of text as each stage of the fit starts (each
             candidate model, the interval checks, the levels model); ``print`` shows
             them.
@@ -116,6 +124,7 @@ def fit(
         variability=variability,
         actuator=actuator,
         offset=offset,
+        level=level,
         progress=progress,
         settings=settings,
     )

@@ -24,7 +24,7 @@ from idtool._atomic import atomic_output_dir
 from idtool._data._dataset import Dataset, load_dataset
 from idtool._data._select import select_traces
 from idtool._data._write import write_dataset
-from idtool._diagnostic import from_records
+from idtool._diagnostic import Diagnostic, from_records
 from idtool._errors import IdtoolError
 from idtool._fit._result import Estimate, FitResult
 from idtool._fit._run import FitRun
@@ -260,9 +260,35 @@ class Fit:
     ) -> Predictions:
         """Friction ratio FR (median and 95% band) and reduction ``100 (1 - FR)`` [%]
         over the grid loads [N] x commanded amplitude fractions x speeds [m/s] (default
-        the fit's speed); warns where the grid leaves the fitted range."""
+        the fit's speed); warns where the grid leaves the fitted range. Under the
+        relaxing ON level FR is the cold horn's, at the window's start, and a note gives
+        the rises to its steady state (:mod:`idtool._model._level_model`)."""
         draws = self.draws(max_draws, seed)
-        return predict_table(draws, self.model.data, load_n, amplitude, speed_m_s)
+        table = predict_table(draws, self.model.data, load_n, amplitude, speed_m_s)
+        note = self._steady_state_note()
+        if note is None:
+            return table
+        return dataclasses.replace(table, warnings=(*table.warnings, note))
+
+    def _steady_state_note(self) -> Diagnostic | None:
+        """Under the relaxing ON level: what the steady state adds to the cold-horn FR
+        (eq. R2 of :mod:`idtool._model._level_model`), from the traces' rises."""
+        if not any(g == "on_rise" for g, _, _ in self.model.level.trace_params):
+            return None
+        values = self.model.values(np.asarray(self._state.z, float))
+        rises = np.atleast_1d(np.asarray(values["on_rise"], float))
+        tau = float(values["on_relax_time_s"])
+        return Diagnostic(
+            "drift_modelled",
+            "the friction ratios are the cold horn's, at the ON window's start (the relaxing "
+            f"ON level): towards steady state, with time constant {tau:.2g} s, the traces' "
+            f"ON levels rose by {100 * np.median(rises):.0f}% of themselves (median; "
+            f"{100 * rises.min():+.0f}% to {100 * rises.max():+.0f}%), FR_ss = min(FR (1 + "
+            "rise), 1); each measured trace's is in fit.json (friction_ratio_steady)",
+            severity="note",
+            median_rise=float(np.median(rises)),
+            time_constant_s=float(tau),
+        )
 
     def amplitude_for(
         self,

@@ -2,7 +2,10 @@
 reported; the load cell's noise, a modelled offset drift and 60 Hz mains are not flagged.
 
 Four fits on small benches (2 loads, 50%, ON 0.5 and 2.5 s, 400 Hz): a fading horn, a
-creeping level, 60 Hz mains (otherwise clean) and the offset drift.
+creeping level, 60 Hz mains (otherwise clean) and the offset drift. The fading and
+creeping benches are fitted with the levels held steady (``level="steady"``): the
+diagnostic as it reads a fit that does not model the drift. With the default
+``level="auto"`` the fit models it (tests/test_relaxing_on.py).
 """
 
 from __future__ import annotations
@@ -51,7 +54,7 @@ def drift_warnings(fit) -> list[str]:
 @pytest.fixture(scope="module")
 def fading():
     dataset, truth = simulate_bench(bench(horn_fading=FADING), SEED)
-    return idtool.fit(dataset), truth
+    return idtool.fit(dataset, level="steady"), truth
 
 
 # --- the statistic ---------------------------------------------------------------------
@@ -137,7 +140,7 @@ def test_creeping_level_is_caught_when_the_offset_is_constant():
     params = bench()
     params["contact"]["level_creep_per_s"] = CREEP_PER_S
     dataset, _ = simulate_bench(params, SEED)
-    fit = idtool.fit(dataset, offset="constant")
+    fit = idtool.fit(dataset, offset="constant", level="steady")
     off = fit.result.plateau_drift["OFF"]
     assert off.flagged and off.statistic > 0
     assert any("the OFF level rises by" in w for w in drift_warnings(fit))
@@ -150,13 +153,13 @@ THREE_LOADS = {"normal_loads_n": [270.0, 450.0, 670.0], "repeats": 2}
 
 
 def test_creeping_level_is_caught_by_default_through_the_offset_drift():
-    """With the default offset='auto', BIC picks the drifting offset, which takes up a
-    creep linear in time; its rates grow with the OFF level (the creep is relative), a
-    load cell's would not: the regression's slope is the creep rate."""
+    """With the default offset='auto' and the levels steady, BIC picks the drifting
+    offset, which takes up a creep linear in time; its rates grow with the OFF level (the
+    creep is relative), a load cell's would not: the regression's slope is the creep rate."""
     params = bench(experiments=THREE_LOADS)
     params["contact"]["level_creep_per_s"] = CREEP_PER_S
     dataset, _ = simulate_bench(params, SEED)
-    fit = idtool.fit(dataset)
+    fit = idtool.fit(dataset, level="steady")
     assert fit.model.offset.name == "drift"
     creep = fit.result.plateau_drift["creep"]
     assert creep.flagged and creep.p_value < P_ALARM
@@ -205,13 +208,27 @@ def test_no_warning_without_a_plateau_drift(edits):
         assert getattr(pooled, "n_plateaus", 1) > 0 and pooled.p_value > P_ALARM
 
 
-def test_a_fading_horn_that_breaks_the_levels_model_still_predicts():
+def _faded_force_without_start_up(force_n, time_s, horn_on_s, off_n, on_n, on_over_time_n):
+    """The simulator's fading horn before issue 26's item 4: the OFF level from t = 0 (no
+    start-up, the OFF level read before the pull), the ON window as now."""
+    depth = off_n - on_n
+    if depth <= 0.0:
+        return force_n
+    covered = np.where(np.asarray(time_s) >= horn_on_s[0], (off_n - force_n) / depth, 0.0)
+    return off_n - covered * (off_n - on_over_time_n)
+
+
+def test_a_fading_horn_that_breaks_the_levels_model_still_predicts(monkeypatch):
     """The 'fading' departure preset at seed 701 (paper matrix, ON level up 23% within a
-    second): the levels' likelihood is not finite there; the fit falls back to the
-    noise-only bands with a warning (it crashed in its predictions' sd draws) and still
-    says the horn fades."""
+    second) as the simulator made it before its start-up was restored: the steady fit
+    misreads the missing start-up and the levels' likelihood is not finite there; the
+    fit falls back to the noise-only bands with a warning (it crashed in its
+    predictions' sd draws) and still says the horn fades."""
+    monkeypatch.setattr(
+        "idtool._simulate._plateau_drift.faded_force_n", _faded_force_without_start_up
+    )
     dataset, _ = simulate_bench(departure_params("fading", 701), seed=701)
-    fit = idtool.fit(dataset, seed=0)
+    fit = idtool.fit(dataset, seed=0, level="steady")
     codes = {w.code for w in with_code(fit.warnings, *CODES)}
     assert {"levels_not_estimated", "drift_on"} <= codes and fit.levels is None
     (p,) = fit.predict(450.0, 0.6)

@@ -31,6 +31,7 @@ def _run(args: argparse.Namespace) -> int:
         variability=args.variability == "on",
         actuator=args.actuator,
         offset=args.offset,
+        level=args.level,
         seed=args.seed,
         starts=args.starts,
         compare_laws=args.compare_laws,
@@ -102,6 +103,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="auto",
         help="the load-cell offset within a trace, %(choices)s: constant, drift (linear, "
         "per trace); default auto fits both and keeps the lower BIC",
+    )
+    p.add_argument(
+        "--level",
+        choices=registry_names("LEVEL_MODELS", "auto"),
+        metavar="MODEL",
+        default="auto",
+        help="how the friction levels move within their plateaus, %(choices)s: steady, "
+        "relaxing (the ON level relaxes from its cold-horn value with a time constant), "
+        "creeping (the friction grows in proportion through the pull); default auto fits "
+        "steady and tries the others only where its plateaus drift, keeping the lower BIC",
     )
     p.add_argument(
         "--noise",

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from idtool._atomic import refuse_existing, write_text_atomic
 from idtool._cli._args import add_law_argument, registry_names
-from idtool._model._names import DEFAULT_ACTUATOR, DEFAULT_COUPLING
+from idtool._model._names import DEFAULT_ACTUATOR, DEFAULT_COUPLING, DEFAULT_LEVEL_MODEL
 
 __all__ = ["register"]
 
@@ -19,9 +19,13 @@ def _run(args: argparse.Namespace) -> int:
     from idtool._model._benchmodel import shared_params_of
     from idtool._model._coupling import COUPLINGS
     from idtool._model._laws import FRICTION_LAWS
+    from idtool._model._level_model import LEVEL_MODELS
 
     params = shared_params_of(
-        FRICTION_LAWS.get(args.law), COUPLINGS.get(args.coupling), ACTUATORS.get(args.actuator)
+        FRICTION_LAWS.get(args.law),
+        COUPLINGS.get(args.coupling),
+        ACTUATORS.get(args.actuator),
+        level=LEVEL_MODELS.get(args.level),
     )
     table = parameter_template(params)
     if args.out is None:
@@ -37,10 +41,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "parameters",
         help="write a model's parameter table (PEtab-like) for 'idtool fit --parameters'",
-        description="The shared parameters of a friction law, coupling law and actuator "
-        "model, one row each with idtool's unit, bounds and scale, every one estimated: "
-        "a parameter table to edit (fix a value with estimate 0 and nominalValue, narrow "
-        "the bounds, give a start or a prior) and pass to 'idtool fit --parameters'.",
+        description="The shared parameters of a friction law, coupling law, actuator "
+        "model and level model, one row each with idtool's unit, bounds and scale, every "
+        "one estimated: a parameter table to edit (fix a value with estimate 0 and "
+        "nominalValue, narrow the bounds, give a start or a prior) and pass to 'idtool fit "
+        "--parameters'.",
     )
     add_law_argument(p)
     p.add_argument(
@@ -56,6 +61,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="MODEL",
         default=DEFAULT_ACTUATOR,
         help=f"actuator model: %(choices)s (default {DEFAULT_ACTUATOR})",
+    )
+    p.add_argument(
+        "--level",
+        choices=registry_names("LEVEL_MODELS"),
+        metavar="MODEL",
+        default=DEFAULT_LEVEL_MODEL,
+        help=f"level model: %(choices)s (default {DEFAULT_LEVEL_MODEL})",
     )
     p.add_argument("-o", "--out", help="write the table to this file (default: print it)")
     p.add_argument("--force", action="store_true", help="replace an existing --out")

@@ -78,6 +78,7 @@ def _free_model(result: FitResult) -> BenchModel:
         noise=type(model.noise),
         actuator=model.actuator,
         offset=model.offset,
+        level=model.level,
         settings=(*settings, ParameterSetting(DETUNING, source="identified from the traces")),
     )
 
@@ -139,6 +140,7 @@ def detuned_fit(result: FitResult, z_best: np.ndarray) -> FitResult:
         start_from=start,
         offset=m.offset.name,
         settings=free.settings,
+        level=m.level.name,
     )
 
 

@@ -35,7 +35,7 @@ from idtool._fit._program import run_lm, unwhiten
 from idtool._fit._result import Estimate, FitResult, estimate_of
 from idtool._model._actuator import DEFAULT_ACTUATOR
 from idtool._model._benchmodel import BenchModel, bench_model
-from idtool._model._names import DEFAULT_COUPLING
+from idtool._model._names import DEFAULT_COUPLING, DEFAULT_LEVEL_MODEL
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._offset import DEFAULT_OFFSET
 from idtool._model._settings import ParameterSetting
@@ -157,15 +157,18 @@ def fit_model(
     start_from: FitResult | None = None,
     offset: str = DEFAULT_OFFSET,
     settings: tuple[ParameterSetting, ...] = (),
+    level: str = DEFAULT_LEVEL_MODEL,
 ) -> FitResult:
-    """Fit one law, coupling, actuator and load-cell offset model to prepared data; see
-    the module docstring. ``start_from``: a fit of a model this one nests (the slope
+    """Fit one law, coupling, actuator, load-cell offset and level model to prepared data;
+    see the module docstring. ``start_from``: a fit of a model this one nests (the slope
     actuator for the lag one, the constant offset for the drifting one, the constant
-    coupling for a saturating one): its optimum is the start, the new parameters where
-    this model reduces to that one (:attr:`Param.nested_at`), with no multi-start.
+    coupling for a saturating one, the steady levels for the relaxing or creeping ones):
+    its optimum is the start, the new parameters where this model reduces to that one
+    (:attr:`Param.nested_at`; each of :attr:`Param.nested_starts` in turn, the likeliest
+    end kept), with no multi-start.
     ``settings``: the user's fixed values, bounds, scales, starts and priors
     (:mod:`idtool._model._settings`)."""
-    model = bench_model(data, law, coupling, noise, actuator, offset, settings)
+    model = bench_model(data, law, coupling, noise, actuator, offset, settings, level)
     k = model.n_physical
     base = model.z0()
     everything = np.ones(base.size, bool)
@@ -192,9 +195,20 @@ def fit_model(
                 for i, p in enumerate(model.params)
             ]
         )
-        best = run(z, everything, start_from.phi, _POLISH_STEPS)
-        best, phi = _settle_phi(model, best, start_from.phi, run)
-        return _summarise(model, best, phi, start_from.optima, count)
+        # a new parameter with several starts (Param.nested_starts): each in turn
+        zs = [z]
+        for i, p in enumerate(model.params):
+            if p.name not in prev and p.nested_starts:
+                zs = [zz.copy() for zz in zs for _ in p.nested_starts]
+                values = p.nested_starts * (len(zs) // len(p.nested_starts))
+                for zz, value in zip(zs, values, strict=True):
+                    zz[i] = p.internal(value)
+        fits = []
+        for zz in zs:  # ranked by likelihood: each settles its own phi
+            best = run(zz, everything, start_from.phi, _POLISH_STEPS)
+            best, phi = _settle_phi(model, best, start_from.phi, run)
+            fits.append(_summarise(model, best, phi, start_from.optima, count))
+        return max(fits, key=lambda f: f.loglik)
 
     # 2. multi-start: from each quasi-random point of the physical parameters (the
     # nuisances at their data-driven start values) everything is fitted jointly. A step

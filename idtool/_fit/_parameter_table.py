@@ -49,6 +49,7 @@ from idtool._model._actuator import ACTUATORS
 from idtool._model._benchmodel import shared_params_of
 from idtool._model._coupling import COUPLINGS
 from idtool._model._laws import FRICTION_LAWS
+from idtool._model._level_model import LEVEL_MODELS
 from idtool._model._params import Param
 from idtool._model._settings import ParameterSetting
 
@@ -136,10 +137,14 @@ def parameter_units() -> dict[str, str]:
     for law in FRICTION_LAWS.names():
         for coupling in COUPLINGS.names():
             for actuator in ACTUATORS.names():
-                every = shared_params_of(
-                    FRICTION_LAWS.get(law), COUPLINGS.get(coupling), ACTUATORS.get(actuator)
-                )
-                units |= {p.name: p.unit for p in every}
+                for level in LEVEL_MODELS.names():
+                    every = shared_params_of(
+                        FRICTION_LAWS.get(law),
+                        COUPLINGS.get(coupling),
+                        ACTUATORS.get(actuator),
+                        level=LEVEL_MODELS.get(level),
+                    )
+                    units |= {p.name: p.unit for p in every}
     return units
 
 

@@ -45,6 +45,17 @@ friction coefficient moves the force in proportion to it. So the fitted drift ra
 degrees of freedom (the drift rates' scatter from pull to pull estimated by the
 regression itself) at :data:`P_ALARM`, and reported when ``c`` times the median trace
 duration reaches the OFF plateau's :data:`MIN_RELATIVE_CHANGE` (:class:`LevelCreep`).
+
+When the fit models the drift (level model ``relaxing`` or ``creeping``,
+:mod:`idtool._model._level_model`, chosen by BIC when the steady fit's plateaus drift),
+the residuals carry little of it, and the tests above ask only whether the model left
+some drift behind (their warnings then say so). The drift itself is still the bench's
+and still reported, from the model's own parameters (:class:`ModelledDrift`, code
+``drift_modelled``): the ON level's median rise towards its steady state and its time
+constant (a fading horn), or the relative creep rate of the friction (a creeping
+level), warned of when it reaches :data:`MIN_RELATIVE_CHANGE` (ON: the median rise;
+OFF: the creep over the median trace), so a fading or creeping bench warns whichever
+level model the fit chose.
 """
 
 from __future__ import annotations
@@ -66,6 +77,7 @@ __all__ = [
     "MIN_RELATIVE_CHANGE",
     "P_ALARM",
     "LevelCreep",
+    "ModelledDrift",
     "PlateauDrift",
     "level_creep",
     "plateau_drift",
@@ -110,8 +122,9 @@ class PlateauDrift:
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
-    def sentence(self) -> str:
-        """The warning, in physical terms."""
+    def sentence(self, level_model: str = "steady") -> str:
+        """The warning, in physical terms (``level_model``: the fit's, which the last
+        sentence names)."""
         level = "ON" if self.kind == "ON" else "OFF"
         verb = "rises" if self.median_relative_change > 0 else "falls"
         why = (
@@ -126,9 +139,13 @@ class PlateauDrift:
             f"{100 * abs(self.median_relative_change):.1f}% over "
             f"{self.median_duration_s:.1f} s (median) in {self.n_same_sign} of "
             f"{self.n_plateaus} {level} plateaus ({self.n_traces} traces; pooled z = "
-            f"{self.statistic:+.1f}, p = {self.p_value:.2g}): {why}. The fit holds each "
-            "level constant, so its levels are averages over the plateau and the "
-            "friction ratios depend on the window's length"
+            f"{self.statistic:+.1f}, p = {self.p_value:.2g}): {why}. "
+            + (
+                "The fit holds each level constant, so its levels are averages over the "
+                "plateau and the friction ratios depend on the window's length"
+                if level_model == "steady"
+                else f"This is what the {level_model} level model left in the residuals"
+            )
         )
         return Diagnostic(f"drift_{self.kind.lower()}", message, **self.to_dict())
 
@@ -164,6 +181,101 @@ class LevelCreep:
             "the friction may be creeping (webbing warming or wearing in), not the offset"
         )
         return Diagnostic("drift_creep", message, **self.to_dict())
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelledDrift:
+    """The drift a level model (not ``steady``) represents, from its parameters (module
+    docstring): ``model`` its name; ``kind`` "ON" (relaxing: ``median_rise`` [-] and its
+    ``rise_range`` over the traces, ``time_constant_s`` [s] and its ``ci95``) or "OFF"
+    (creeping: ``rate_per_s`` [1/s] and its ``ci95``, ``median_relative_change`` over the
+    median trace of ``median_duration_s`` [s]); ``flagged`` whether it warns."""
+
+    kind: str
+    model: str
+    flagged: bool
+    median_rise: float = 0.0
+    rise_range: tuple[float, float] = (0.0, 0.0)
+    time_constant_s: float = 0.0
+    rate_per_s: float = 0.0
+    ci95: tuple[float, float] = (0.0, 0.0)
+    median_relative_change: float = 0.0
+    median_duration_s: float = 0.0
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    def sentence(self) -> Diagnostic:
+        lo, hi = self.ci95
+        if self.kind == "ON":
+            verb = "rises" if self.median_rise > 0 else "falls"
+            why = (
+                "the horn may be fading (its amplitude dropping through the window)"
+                if self.median_rise > 0
+                else "the reduction may be building up through the window"
+            )
+            message = (
+                f"{DRIFT}: the ON level {verb} towards a steady state "
+                f"{100 * abs(self.median_rise):.0f}% (median; {100 * self.rise_range[0]:+.0f}% "
+                f"to {100 * self.rise_range[1]:+.0f}% over the traces) from its value at the "
+                f"horn's switch-on, with time constant {self.time_constant_s:.2g} s [{lo:.2g}, "
+                f"{hi:.2g}]: {why}. The {self.model} level model, chosen by BIC, follows it: "
+                "the friction ratios the physics model gives are the cold horn's, at the "
+                "window's start and the commanded amplitude; each trace's steady-state ratio "
+                "is in fit.json (traces: friction_ratio_steady)"
+            )
+        else:
+            verb = "rises" if self.rate_per_s > 0 else "falls"
+            message = (
+                f"{DRIFT}: the friction level {verb} by {100 * abs(self.rate_per_s):.2f}% of "
+                f"itself per second of sliding [{100 * lo:+.2f}, {100 * hi:+.2f}] %/s, "
+                f"{100 * abs(self.median_relative_change):.1f}% over the median trace "
+                f"({self.median_duration_s:.1f} s): the friction may be creeping (webbing "
+                f"warming or wearing in). The {self.model} level model, chosen by BIC, "
+                "follows it: mu and the levels are their values at the pull's start, and "
+                "the friction ratios (ON over OFF at the same moment) do not creep"
+            )
+        return Diagnostic("drift_modelled", message, **self.to_dict())
+
+
+def modelled_drift(result: FitResult) -> ModelledDrift | None:
+    """The drift ``result``'s level model represents (None for ``steady``)."""
+    model = result.model
+    name = model.level.name
+    if name == "steady":
+        return None
+    d = model.data
+    v = model.values(np.asarray(result.z, float))
+    if "on_rise" in v:  # relaxing: the traces whose ON level is measured
+        z = np.asarray(result.z, float)
+        levels = np.asarray(run_lm(model, z, np.ones(z.size, bool), result.phi, 0).aux[0])
+        measured = _at_level_s(model, z, levels) >= MIN_AT_LEVEL_S
+        rise = np.asarray(v["on_rise"], float)[measured if measured.any() else slice(None)]
+        tau = result.estimates["on_relax_time_s"]
+        median = float(np.median(rise))
+        return ModelledDrift(
+            kind="ON",
+            model=name,
+            flagged=bool(abs(median) >= MIN_RELATIVE_CHANGE["ON"]),
+            median_rise=median,
+            rise_range=(float(rise.min()), float(rise.max())),
+            time_constant_s=float(tau.estimate),
+            ci95=(float(tau.ci95[0]), float(tau.ci95[1])),
+        )
+    rate = result.estimates["level_creep_per_s"]
+    times, block_trace = np.asarray(d.block_time_s), np.asarray(d.block_trace)
+    durations = [np.ptp(times[block_trace == i]) + d.block_s for i in range(d.n_traces)]
+    duration = float(np.median(durations))
+    change = float(rate.estimate) * duration
+    return ModelledDrift(
+        kind="OFF",
+        model=name,
+        flagged=bool(abs(change) >= MIN_RELATIVE_CHANGE["OFF"]),
+        rate_per_s=float(rate.estimate),
+        ci95=(float(rate.ci95[0]), float(rate.ci95[1])),
+        median_relative_change=change,
+        median_duration_s=duration,
+    )
 
 
 def level_creep(rates_n_s: np.ndarray, off_n: np.ndarray, duration_s: np.ndarray) -> LevelCreep:
@@ -330,7 +442,18 @@ def plateau_noise(plateaus: list[tuple[np.ndarray, np.ndarray]]) -> tuple[float,
 
 def with_plateau_drift(result: FitResult) -> FitResult:
     """``result`` with :attr:`FitResult.plateau_drift` set and a warning (beginning with
-    :data:`DRIFT`) for each kind of plateau whose level drifts."""
-    pooled = plateau_drift(result)
-    warnings = [p.sentence() for p in pooled.values() if p.flagged]
+    :data:`DRIFT`) for each kind of plateau whose level drifts, and for the drift its
+    level model represents (``modelled``, :class:`ModelledDrift`)."""
+    pooled: dict[str, PlateauDrift | LevelCreep | ModelledDrift] = {**plateau_drift(result)}
+    level = result.model.level.name
+    warnings = [
+        p.sentence(level) if isinstance(p, PlateauDrift) else p.sentence()
+        for p in pooled.values()
+        if p.flagged
+    ]
+    modelled = modelled_drift(result)
+    if modelled is not None:
+        pooled["modelled"] = modelled
+        if modelled.flagged:
+            warnings.insert(0, modelled.sentence())
     return dataclasses.replace(result, plateau_drift=pooled, warnings=[*result.warnings, *warnings])

@@ -11,7 +11,14 @@ the constant coupling and says so. The actuator model is chosen the same way by 
 :mod:`idtool._model._actuator`), and then the load-cell offset model (``offset="auto"``:
 a constant offset per trace, or one that drifts linearly within the trace,
 :mod:`idtool._model._offset`), each richer model started from the optimum of the one
-it nests.
+it nests. The level model (``level="auto"``, :mod:`idtool._model._level_model`) is
+steady unless the best steady fit's plateaus drift (:mod:`idtool._fit._plateau_drift`):
+an ON level drifting within its window tries the relaxing ON level, an OFF level drifting
+(or offset drifts growing with the load) the creeping level, each nested in that fit
+(the creeping one also in the constant offset's fit when the drifting offset was chosen,
+since a creep modelled leaves the offset nothing to drift by), and BIC decides. Trying
+them only then keeps the fit of stationary data as fast as before; the trigger's false
+alarm rate is the diagnostic's, 1e-3 per kind of plateau.
 """
 
 from __future__ import annotations
@@ -38,7 +45,7 @@ from idtool._fit._detuning import (
 )
 from idtool._fit._fit import fit_model
 from idtool._fit._intervals import Profile, check_intervals, profile_parameter
-from idtool._fit._plateau_drift import with_plateau_drift
+from idtool._fit._plateau_drift import plateau_drift, with_plateau_drift
 from idtool._fit._prefetch import CompileAhead
 from idtool._fit._program import lm_arguments, lm_program
 from idtool._fit._result import FitResult
@@ -47,6 +54,7 @@ from idtool._model._actuator import ACTUATORS
 from idtool._model._benchmodel import bench_model, shared_params_of
 from idtool._model._coupling import COUPLINGS
 from idtool._model._laws import FRICTION_LAWS
+from idtool._model._level_model import LEVEL_MODELS
 from idtool._model._names import BY_DESIGN, DEFAULT_COUPLING, SPEED_RESOLVED_COUPLINGS
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._offset import OFFSETS
@@ -91,8 +99,11 @@ class FitRun:
 MIN_LAW_WEIGHT = 1e-3
 
 
-def _key(law: str, coupling: str, actuator: str, offset: str) -> str:
-    return f"{law}/{coupling}/{actuator}/{offset}"
+def _key(law: str, coupling: str, actuator: str, offset: str, level: str) -> str:
+    """A candidate's name: ``law/coupling/actuator/offset``, then ``/level`` unless the
+    levels are steady (so keys stay what they were before the level models)."""
+    key = f"{law}/{coupling}/{actuator}/{offset}"
+    return key if level == "steady" else f"{key}/{level}"
 
 
 def _better(multi: FitResult, nested: FitResult) -> FitResult:
@@ -159,16 +170,20 @@ def fit_dataset(
     offset: str = "auto",
     progress: Callable[[str], None] | None = None,
     settings: Sequence[ParameterSetting] = (),
+    level: str = "auto",
 ) -> FitRun:
-    """Fit ``dataset``; ``law``, ``coupling``, ``noise``, ``actuator`` and ``offset`` by
-    registered name (:data:`FRICTION_LAWS`, :data:`COUPLINGS`, :data:`NOISE_MODELS`,
-    :data:`ACTUATORS`, :data:`OFFSETS`); ``coupling="by-design"`` (default) fits the
-    power limit, or on a dataset that pulled a load and amplitude at two or more speeds
-    the power limit and the load-power law (:data:`SPEED_RESOLVED_COUPLINGS`, BIC
-    chooses; :mod:`idtool._data._design`), ``coupling="auto"`` every registered
-    coupling law, ``actuator="auto"`` (default) every actuator model, ``offset="auto"``
-    (default) every offset model on the best actuator, ``compare_laws`` every friction
-    law with a contact stiffness; BIC chooses. ``mains_hz`` [Hz]: the block means span
+    """Fit ``dataset``; ``law``, ``coupling``, ``noise``, ``actuator``, ``offset`` and
+    ``level`` by registered name (:data:`FRICTION_LAWS`, :data:`COUPLINGS`,
+    :data:`NOISE_MODELS`, :data:`ACTUATORS`, :data:`OFFSETS`, :data:`LEVEL_MODELS`);
+    ``coupling="by-design"`` (default) fits the power limit, or on a dataset that pulled
+    a load and amplitude at two or more speeds the power limit and the load-power law
+    (:data:`SPEED_RESOLVED_COUPLINGS`, BIC chooses; :mod:`idtool._data._design`),
+    ``coupling="auto"`` every registered coupling law, ``actuator="auto"`` (default)
+    every actuator model, ``offset="auto"`` (default) every offset model on the best
+    actuator, ``level="auto"`` (default) the steady levels and, where the best fit's
+    plateaus drift, the relaxing ON level or the creeping level nested in it (module
+    docstring), ``compare_laws`` every friction law with a contact stiffness; BIC
+    chooses. ``mains_hz`` [Hz]: the block means span
     whole periods of it; None takes ``rig.mains_frequency_hz``, else the hum found in
     the traces, else 50 Hz (:func:`idtool._data._mains.resolve_mains`). ``variability``
     (default): the chosen fit's intervals carry pull-to-pull scatter and model
@@ -201,21 +216,25 @@ def fit_dataset(
         couplings = ("constant",)
     actuators = ACTUATORS.names() if actuator == "auto" else (ACTUATORS.get(actuator).name,)
     offsets = OFFSETS.names() if offset == "auto" else (OFFSETS.get(offset).name,)
-    settings = check_settings(tuple(settings), laws, couplings, actuators)
+    lv = "steady" if level == "auto" else LEVEL_MODELS.get(level).name
+    levels = LEVEL_MODELS.names() if level == "auto" else (lv,)
+    settings = check_settings(tuple(settings), laws, couplings, actuators, levels)
     with CompileAhead() as ahead:
         # the candidates' programs, compiled in the order the loop below needs them
         # while it fits the ones before (the first it compiles itself); the offset
         # models nest in the best actuator model, most often the simplest
-        plan = [(lw, cp, ac, offsets[0]) for lw in laws for cp in couplings for ac in actuators]
+        plan = [(lw, cp, ac, offsets[0], lv) for lw in laws for cp in couplings for ac in actuators]
         plan += [
-            (lw, cp, actuators[0], of) for lw in laws for cp in couplings for of in offsets[1:]
+            (lw, cp, actuators[0], of, lv) for lw in laws for cp in couplings for of in offsets[1:]
         ]
         for names in plan[1:]:
             ahead.call(functools.partial(_compile_lm, data, names, noise, settings))
         candidates: dict[str, FitResult] = {}
 
-        def fit_one(lw: str, cp: str, ac: str, of: str, start: FitResult | None) -> FitResult:
-            return fit_model(data, lw, cp, seed, n_starts, noise, ac, start, of, settings)
+        def fit_one(
+            lw: str, cp: str, ac: str, of: str, start: FitResult | None, lvl: str = lv
+        ) -> FitResult:
+            return fit_model(data, lw, cp, seed, n_starts, noise, ac, start, of, settings, lvl)
 
         for lw in laws:
             for cp in couplings:
@@ -225,7 +244,7 @@ def fit_dataset(
                 group: dict[str, FitResult] = {}
                 nested = None
                 for ac in actuators:
-                    key = _key(lw, cp, ac, offsets[0])
+                    key = _key(lw, cp, ac, offsets[0], lv)
                     say(f"fitting {key}")
                     result = fit_one(lw, cp, ac, offsets[0], nested)
                     if nested is None and cp != couplings[0]:
@@ -233,7 +252,7 @@ def fit_dataset(
                         # scale far above every alpha N): the multi-start may miss the
                         # basin where the law is all but the simplest one (data that do
                         # not saturate: 8 starts found the low-Kt basin instead, 6x off)
-                        simplest = candidates[_key(lw, couplings[0], ac, offsets[0])]
+                        simplest = candidates[_key(lw, couplings[0], ac, offsets[0], lv)]
                         result = _better(result, fit_one(lw, cp, ac, offsets[0], simplest))
                     if variability and not candidates and not group:
                         # the first fit tells the levels model's shapes
@@ -243,11 +262,27 @@ def fit_dataset(
                 base = min(group.values(), key=lambda f: f.bic)
                 ac = base.model.actuator.name
                 for of in offsets[1:]:
-                    say(f"fitting {_key(lw, cp, ac, of)}")
-                    group[_key(lw, cp, ac, of)] = fit_one(lw, cp, ac, of, base)
+                    say(f"fitting {_key(lw, cp, ac, of, lv)}")
+                    group[_key(lw, cp, ac, of, lv)] = fit_one(lw, cp, ac, of, base)
                 candidates |= group
         ranked = sorted(candidates.items(), key=lambda kv: kv[1].bic)
         best_key, best = ranked[0]
+        tried: tuple[str, ...] = ()
+        if level == "auto":  # the levels drift within their plateaus: try modelling it
+            tried = drifting_levels(best)
+            m = best.model
+            lw, cp, ac, of = m.law.name, m.coupling.name, m.actuator.name, m.offset.name
+            for lvl in tried:
+                say(f"fitting {_key(lw, cp, ac, of, lvl)} (the steady fit's plateaus drift)")
+                candidates[_key(lw, cp, ac, of, lvl)] = fit_one(lw, cp, ac, of, best, lvl)
+                plain = candidates.get(_key(lw, cp, ac, offsets[0], lv))
+                if lvl == "creeping" and of != offsets[0] and plain is not None:
+                    # a creep modelled, the offset may have nothing left to drift by
+                    key = _key(lw, cp, ac, offsets[0], lvl)
+                    say(f"fitting {key} (the steady fit's plateaus drift)")
+                    candidates[key] = fit_one(lw, cp, ac, offsets[0], plain, lvl)
+            ranked = sorted(candidates.items(), key=lambda kv: kv[1].bic)
+            best_key, best = ranked[0]
         say(f"checking the intervals of {best_key}")
         best = candidates[best_key] = check_intervals(best)
         profiles = {}
@@ -315,6 +350,11 @@ def fit_dataset(
                 f"{best_key}: BIC lower by {second.bic - best.bic:.1f} and AIC by "
                 f"{second.aic - best.aic:.1f} than {second_key}"
             )
+        if tried:
+            reason += (
+                f"; the steady fit's plateaus drift, so the {' and '.join(tried)} level "
+                f"model{'s were' if len(tried) > 1 else ' was'} tried, nested in it"
+            )
         if coupling == BY_DESIGN and pairs:
             reason += (
                 f"; {len(pairs)} load and amplitude pair(s) pulled at two or more speeds, "
@@ -365,11 +405,25 @@ def kt_through_coupling(law: str, pairs: Sequence[tuple[float, float]] = ()) -> 
     )
 
 
-def _compile_lm(data: FitData, names: tuple[str, str, str, str], noise: str, settings) -> None:
+def drifting_levels(result: FitResult) -> tuple[str, ...]:
+    """The level models worth trying on ``result``'s data (a steady-levels fit): the
+    relaxing ON level if its ON plateaus drift, the creeping level if its OFF plateaus
+    drift or its offset drifts grow with the load (:func:`plateau_drift`)."""
+    pooled = plateau_drift(result)
+    out = []
+    if pooled["ON"].flagged:
+        out.append("relaxing")
+    if pooled["OFF"].flagged or ("creep" in pooled and pooled["creep"].flagged):
+        out.append("creeping")
+    return tuple(out)
+
+
+def _compile_lm(data: FitData, names: tuple[str, str, str, str, str], noise: str, settings) -> None:
     """Compile the Levenberg-Marquardt program of the model ``names`` (law, coupling,
-    actuator, offset)."""
-    lw, cp, ac, of = names
-    lm_program.lower(*lm_arguments(bench_model(data, lw, cp, noise, ac, of, settings))).compile()
+    actuator, offset, level)."""
+    lw, cp, ac, of, lvl = names
+    model = bench_model(data, lw, cp, noise, ac, of, settings, lvl)
+    lm_program.lower(*lm_arguments(model)).compile()
 
 
 def check_settings(
@@ -377,6 +431,7 @@ def check_settings(
     laws: Sequence[str],
     couplings: Sequence[str],
     actuators: Sequence[str],
+    levels: Sequence[str] = ("steady",),
 ) -> tuple[ParameterSetting, ...]:
     """``settings`` if each names a shared parameter of some candidate model and fits
     it (bounds, scale, value); else an :class:`IdtoolError` naming where it was given."""
@@ -384,11 +439,15 @@ def check_settings(
     for lw in laws:
         for cp in couplings:
             for ac in actuators:
-                every = shared_params_of(
-                    FRICTION_LAWS.get(lw), COUPLINGS.get(cp), ACTUATORS.get(ac)
-                )
-                for p in every:
-                    declared.setdefault(p.name, p)
+                for lvl in levels:
+                    every = shared_params_of(
+                        FRICTION_LAWS.get(lw),
+                        COUPLINGS.get(cp),
+                        ACTUATORS.get(ac),
+                        level=LEVEL_MODELS.get(lvl),
+                    )
+                    for p in every:
+                        declared.setdefault(p.name, p)
     problems, seen = [], set()
     for s in settings:
         where = f"{s.source}: " if s.source else ""

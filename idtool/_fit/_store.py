@@ -159,10 +159,11 @@ def load_stored_fit(folder: str | Path) -> StoredFit:
         )
     settings = tuple(ParameterSetting.from_dict(s) for s in doc.get("parameter_settings", []))
 
-    def stored(coupling: str, actuator: str, offset: str, path: Path, alternates) -> StoredFit:
-        model = bench_model(
-            data, doc["law"], coupling, doc["noise"].get("name", "ar1"), actuator, offset, settings
-        )
+    def stored(
+        coupling: str, actuator: str, offset: str, level: str, path: Path, alternates
+    ) -> StoredFit:
+        noise = doc["noise"].get("name", "ar1")
+        model = bench_model(data, doc["law"], coupling, noise, actuator, offset, settings, level)
         state = np.load(path)
         if tuple(state["names"]) != model.names:
             raise IdtoolError(f"{path}: parameters do not match the model; fit again")
@@ -185,15 +186,17 @@ def load_stored_fit(folder: str | Path) -> StoredFit:
         )
 
     alternates = {}
-    for w in doc.get("coupling_laws", []):  # law/coupling/actuator/offset in "key"
+    for w in doc.get("coupling_laws", []):  # law/coupling/actuator/offset[/level] in "key"
         if "state_file" in w:
-            _, coupling, actuator, offset = w["key"].split("/")
-            alt = stored(coupling, actuator, offset, folder / w["state_file"], {})
+            _, coupling, actuator, offset, *rest = w["key"].split("/")
+            level = rest[0] if rest else "steady"  # keys before the level models: 4 parts
+            alt = stored(coupling, actuator, offset, level, folder / w["state_file"], {})
             alternates[w["law"]] = (float(w["bic_weight"]), alt)
     return stored(
         doc["coupling"],
         doc.get("actuator", {}).get("name", "slope"),  # fits before the lag model: slope
         doc.get("offset", {}).get("name", "constant"),  # before the drift model: constant
+        doc.get("level", {}).get("name", "steady"),  # before the level models: steady
         state_path,
         alternates,
     )

@@ -3,10 +3,10 @@
 A :class:`BenchModel` is an ``eqx.Module``: the block-averaged traces
 (:class:`~idtool._data._blocks.FitData`) are its leaves, so one compiled program serves
 every dataset of the same shape; the friction law, the coupling law, the actuator model,
-the load-cell offset model and the noise model are static types, each declaring its own
-parameters (``fit_params``, ``trace_params``, ``params``) and registered by name
-(:data:`FRICTION_LAWS`, :data:`COUPLINGS`, :data:`ACTUATORS`, :data:`OFFSETS`,
-:data:`NOISE_MODELS`).
+the load-cell offset model, the level model and the noise model are static types, each
+declaring its own parameters (``fit_params``, ``trace_params``, ``params``) and
+registered by name (:data:`FRICTION_LAWS`, :data:`COUPLINGS`, :data:`ACTUATORS`,
+:data:`OFFSETS`, :data:`LEVEL_MODELS`, :data:`NOISE_MODELS`).
 
 Parameters, in the order of the internal vector ``z``:
 
@@ -14,12 +14,14 @@ Parameters, in the order of the internal vector ``z``:
   ``stribeck_velocity_m_s``), ``mu``, the coupling's (``coupling_gain``, and
   ``power_load_n`` [N] for the power-limited law);
 * shared bench ones: the actuator model's, ``slope_n_s`` and ``startup_slope_n_s``
-  [N/s] (the lag model adds ``time_constant_s`` [s], :mod:`idtool._model._actuator`);
+  [N/s] (the lag model adds ``time_constant_s`` [s], :mod:`idtool._model._actuator`),
+  then the level model's (the relaxing ON level's ``on_relax_time_s`` [s], the creeping
+  level's ``level_creep_per_s`` [1/s], :mod:`idtool._model._level_model`);
 * per trace (:attr:`BenchModel.trace_groups`): the offset model's (the load-cell offset
   [N]: it moves between pulls, the baseline before each pull measures it; the drift model
   adds its drift [N/s], :mod:`idtool._model._offset`), then :data:`TRACE_GROUPS`: the pull
   start [s] and the lag of the horn behind the logged ON flag at switch-on and at
-  switch-off [s].
+  switch-off [s]; then the level model's (the relaxing ON level's rise [-]).
 
 Every parameter lives on an unbounded internal scale (:mod:`idtool._model._params`).
 The noise parameters are not in ``z``: the fit estimates phi from its residuals, the
@@ -43,6 +45,7 @@ from idtool._model._actuator import ACTUATORS, DEFAULT_ACTUATOR, AbstractActuato
 from idtool._model._bench import TraceTiming, on_friction_ratio
 from idtool._model._coupling import COUPLINGS, AbstractCoupling
 from idtool._model._laws import FRICTION_LAWS, MU, AbstractFrictionLaw
+from idtool._model._level_model import DEFAULT_LEVEL_MODEL, LEVEL_MODELS, AbstractLevelModel
 from idtool._model._names import DEFAULT_COUPLING
 from idtool._model._noise import DEFAULT_NOISE, NOISE_MODELS, AbstractNoise, whiten
 from idtool._model._offset import DEFAULT_OFFSET, OFFSETS, AbstractOffset
@@ -65,7 +68,7 @@ TRACE_GROUPS = (
 
 class BenchModel(eqx.Module):
     """The model of one dataset for one friction law, coupling law, actuator model,
-    load-cell offset model and noise model.
+    load-cell offset model, level model and noise model.
 
     Build it with :func:`bench_model`. Pure and jittable: pass it to ``jax.jit``-ed
     functions as an argument.
@@ -79,6 +82,7 @@ class BenchModel(eqx.Module):
     actuator: type[AbstractActuator] = eqx.field(static=True)
     noise: AbstractNoise = eqx.field(static=True)
     offset: type[AbstractOffset] = eqx.field(static=True)
+    level: type[AbstractLevelModel] = eqx.field(static=True, default=LEVEL_MODELS.get("steady"))
     # the user's fixed values, bounds, scales, starts and priors (:mod:`._settings`)
     settings: tuple[ParameterSetting, ...] = eqx.field(static=True, default=())
 
@@ -87,13 +91,13 @@ class BenchModel(eqx.Module):
     def shared_params(self) -> tuple[Param, ...]:
         """Estimated shared parameters, physical first (module docstring), with the
         user's settings applied; the fixed ones are left out (:attr:`fixed`)."""
-        return shared_params_of(self.law, self.coupling, self.actuator, self.settings)
+        return shared_params_of(self.law, self.coupling, self.actuator, self.settings, self.level)
 
     @property
     def declared_params(self) -> tuple[Param, ...]:
         """The shared parameters as the laws and models declare them, before the user's
         settings (fixed ones included)."""
-        return shared_params_of(self.law, self.coupling, self.actuator, ())
+        return shared_params_of(self.law, self.coupling, self.actuator, (), self.level)
 
     @property
     def fixed(self) -> dict[str, float]:
@@ -108,7 +112,7 @@ class BenchModel(eqx.Module):
     def trace_groups(self) -> tuple[tuple[str, str, float], ...]:
         """Per-trace nuisance groups (name, unit, internal scale): the offset model's,
         then :data:`TRACE_GROUPS`."""
-        return _trace_groups(self.offset)
+        return _trace_groups(self.offset, self.level)
 
     @property
     def params(self) -> tuple[Param, ...]:
@@ -206,6 +210,9 @@ class BenchModel(eqx.Module):
     def actuator_of(self, v: Mapping[str, ArrayLike]) -> AbstractActuator:
         return self.actuator.from_values(self.complete(v))
 
+    def level_of(self, v: Mapping[str, ArrayLike]) -> AbstractLevelModel:
+        return self.level.from_values(self.complete(v))
+
     def friction_ratios(self, v: Mapping[str, Array], load_n, alpha, speed_m_s) -> Array:
         """FR at operating points (arrays of equal shape) from physical values ``v``
         (notes §3, §5): the cycle-averaged contact at the coupling's slip amplitude."""
@@ -260,7 +267,10 @@ class BenchModel(eqx.Module):
         offset = self.offset.offset_n(
             {g: per_block(v[g]) for g, _, _ in self.offset.trace_params}, t, per_block(start)
         )
-        force = actuator.force_n(t, per_block(off_n), per_block(on_n), timing, offset)
+        level = self.level.from_values(
+            self.complete(v) | {g: per_block(v[g]) for g, _, _ in self.level.trace_params}
+        )
+        force = level.force_n(actuator, t, per_block(off_n), per_block(on_n), timing, offset)
         return force.mean(axis=1)
 
     def predict(self, z: Float[Array, " p"]) -> Float[Array, " blocks"]:
@@ -293,15 +303,19 @@ def shared_params_of(
     coupling: type[AbstractCoupling],
     actuator: type[AbstractActuator],
     settings: tuple[ParameterSetting, ...] = (),
+    level: type[AbstractLevelModel] | None = None,
 ) -> tuple[Param, ...]:
-    """The shared parameters of a law, coupling and actuator model, in ``z``'s order;
-    ``settings`` applied (the fixed ones left out)."""
-    every = (*law.fit_params, MU, *coupling.fit_params, *actuator.fit_params)
+    """The shared parameters of a law, coupling, actuator and level model, in ``z``'s
+    order; ``settings`` applied (the fixed ones left out)."""
+    level_params = level.fit_params if level is not None else ()
+    every = (*law.fit_params, MU, *coupling.fit_params, *actuator.fit_params, *level_params)
     return apply_settings(every, settings) if settings else every
 
 
-def _trace_groups(offset: type[AbstractOffset]) -> tuple[tuple[str, str, float], ...]:
-    return (*offset.trace_params, *TRACE_GROUPS)
+def _trace_groups(
+    offset: type[AbstractOffset], level: type[AbstractLevelModel]
+) -> tuple[tuple[str, str, float], ...]:
+    return (*offset.trace_params, *TRACE_GROUPS, *level.trace_params)
 
 
 def _add_trailing(per_trace: ArrayLike, shift: ArrayLike, extra: int) -> Array:
@@ -320,6 +334,7 @@ def bench_model(
     actuator: str | type[AbstractActuator] = DEFAULT_ACTUATOR,
     offset: str | type[AbstractOffset] = DEFAULT_OFFSET,
     settings: tuple[ParameterSetting, ...] = (),
+    level: str | type[AbstractLevelModel] = DEFAULT_LEVEL_MODEL,
 ) -> BenchModel:
     """The :class:`BenchModel` of prepared ``data``; laws and models by registered name
     or class; ``settings``: the user's fixed values, bounds, scales, starts and priors
@@ -335,13 +350,14 @@ def bench_model(
     noise_cls = NOISE_MODELS.get(noise)
     actuator_cls = ACTUATORS.get(actuator)
     offset_cls = OFFSETS.get(offset)
-    groups_of_trace = _trace_groups(offset_cls)
+    level_cls = LEVEL_MODELS.get(level)
+    groups_of_trace = _trace_groups(offset_cls, level_cls)
     s = start_values(data)
     # the rig's values for the coupling (a transducer's), unless the user set them
     given = {x.name for x in settings}
     rig = coupling_cls.rig_settings(float(data.vibration_frequency_hz), data.transducer)
     settings = (*(x for x in rig if x.name not in given), *settings)
-    shared = shared_params_of(law_cls, coupling_cls, actuator_cls, settings)
+    shared = shared_params_of(law_cls, coupling_cls, actuator_cls, settings, level_cls)
     guess = {
         "mu": s.friction_coefficient,
         "slope_n_s": s.slope_n_s,
@@ -362,5 +378,6 @@ def bench_model(
         actuator=actuator_cls,
         noise=noise_cls(),
         offset=offset_cls,
+        level=level_cls,
         settings=settings,
     )

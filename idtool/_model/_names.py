@@ -1,4 +1,4 @@
-"""The default coupling law and noise, actuator and offset models by registered name:
+"""The default coupling law and noise, actuator, offset and level models by registered name:
 plain strings in a module that imports nothing, so the command line's parsers can show
 them without loading the models (and JAX)."""
 
@@ -6,6 +6,7 @@ __all__ = [
     "BY_DESIGN",
     "DEFAULT_ACTUATOR",
     "DEFAULT_COUPLING",
+    "DEFAULT_LEVEL_MODEL",
     "DEFAULT_NOISE",
     "DEFAULT_OFFSET",
     "SPEED_RESOLVED_COUPLINGS",
@@ -14,6 +15,9 @@ __all__ = [
 DEFAULT_NOISE = "ar1"
 DEFAULT_ACTUATOR = "slope"
 DEFAULT_OFFSET = "constant"
+# Levels constant within their plateaus (idtool._model._level_model); "auto" fits try the
+# relaxing ON level or the creeping level only where the steady fit's plateaus drift.
+DEFAULT_LEVEL_MODEL = "steady"
 # The power limit, as the paper reports it (idtool._model._coupling_power_limited). The
 # load-power law (its small-signal gain free to fall with the load) covered Kt on benches
 # whose coupling falls otherwise with the load, but widened a clean bench's bands 23%

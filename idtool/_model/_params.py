@@ -44,6 +44,10 @@ class Param:
             simpler law, where a fit of the richer law starts from the simpler law's
             optimum (a saturating coupling's load scale far above every ``alpha N``: the
             constant coupling); ``None`` starts there at ``start``.
+        nested_starts: values it starts from, each in turn, in such a nested fit (the
+            best end point kept), for a parameter the simpler model's optimum says
+            nothing about (a time constant whose effect vanishes there); ``None``: one
+            start, ``nested_at``.
         description: what it is, in words, for reports.
     """
 
@@ -58,6 +62,7 @@ class Param:
     start: float = 1.0
     start_box: tuple[float, float] | None = None
     nested_at: float | None = None
+    nested_starts: tuple[float, ...] | None = None
     description: str = ""
 
     def __post_init__(self):

@@ -176,7 +176,8 @@ def predict_blocks_batch(
     model = target.model
     off, on, _ = jax.vmap(model.levels)(v)  # (walkers, traces)
     vals = dict(target.nuisances if nuisances is None else nuisances)
-    vals |= {p.name: v[p.name] for p in model.actuator.fit_params if p.name in v}  # not fixed
+    bench = (*model.actuator.fit_params, *model.level.fit_params)
+    vals |= {p.name: v[p.name] for p in bench if p.name in v}  # not fixed
     return model.block_means(off.T, on.T, vals).T
 
 

@@ -165,7 +165,13 @@ def _model_for(model: BenchModel, dataset: Dataset) -> BenchModel:
         mains_source=str(d.mains_source),
     )
     return bench_model(
-        data, model.law, model.coupling, type(model.noise), model.actuator, model.offset
+        data,
+        model.law,
+        model.coupling,
+        type(model.noise),
+        model.actuator,
+        model.offset,
+        level=model.level,
     )
 
 

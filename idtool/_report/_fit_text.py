@@ -70,6 +70,8 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
                 **{key: _est(r.estimates[f"{key}[{tid}]"]) for key, _, _ in r.model.trace_groups},
             }
         )
+        if _relaxing(r):
+            traces[-1]["friction_ratio_steady"] = steady_friction_ratio(r, i)
     var = r.variability
     if var is not None:
         free_fr, free_se = var.free.friction_ratio, var.free.friction_ratio_se
@@ -106,6 +108,11 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
         "offset": {
             "name": r.model.offset.name,
             "trace_parameters": [name for name, _, _ in r.model.offset.trace_params],
+        },
+        "level": {
+            "name": r.model.level.name,
+            "parameters": [p.name for p in r.model.level.fit_params],
+            "trace_parameters": [name for name, _, _ in r.model.level.trace_params],
         },
         "aic": r.aic,
         "bic": r.bic,
@@ -167,6 +174,28 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
         "command": prov["command"],
         "versions": prov["versions"],
         "created_utc": prov["created_utc"],
+    }
+
+
+def _relaxing(r: FitResult) -> bool:
+    """Whether ``r``'s ON levels relax (a rise per trace: the relaxing ON level)."""
+    return any(name == "on_rise" for name, _, _ in r.model.level.trace_params)
+
+
+def steady_friction_ratio(r: FitResult, i: int) -> dict[str, float | list[float]]:
+    """Trace ``i``'s friction ratio at steady state under the relaxing ON level,
+    ``min(FR0 (1 + r_i), 1)`` (eq. R2 of :mod:`idtool._model._level_model`): estimate and
+    95% interval from its rise's (FR0 at its estimate), and the rise itself."""
+    fr0 = float(r.friction_ratio[i])
+    rise = r.estimates[f"on_rise[{r.model.data.trace_ids[i]}]"]
+
+    def steady(x: float) -> float:
+        return min(fr0 * (1.0 + x), 1.0)
+
+    return {
+        "estimate": steady(rise.estimate),
+        "ci95": [steady(rise.ci95[0]), steady(rise.ci95[1])],
+        "on_rise": float(rise.estimate),
     }
 
 
@@ -240,7 +269,8 @@ def fit_report(run: FitRun) -> str:
         f"    dataset      {d.name} (sha256 {d.sha256[:12]}...), {d.n_traces} traces, "
         f"{d.n_blocks} block means of {d.block_size} samples",
         f"    model        {r.model.law.name} friction, {r.model.coupling.name} coupling, "
-        f"{r.model.actuator.name} actuator, {r.model.offset.name} load-cell offset",
+        f"{r.model.actuator.name} actuator, {r.model.offset.name} load-cell offset, "
+        f"{r.model.level.name} levels",
         f"    choice       {run.reason}",
         f"    noise        {r.model.noise.description} ({r.model.noise.name}), phi = {r.phi:.3f}, "
         f"innovation sigma = {r.sigma_n:.3g} N",
@@ -299,10 +329,19 @@ def fit_report(run: FitRun) -> str:
         if op in seen:
             continue
         seen.add(op)
-        lines.append(
+        line = (
             f"    {op[0]:6.0f} N, {100 * op[1]:3.0f}%, {op[2]:.3g} m/s   FR = "
             f"{r.friction_ratio[i]:.4f} +/- {r.friction_ratio_se[i]:.4f}"
         )
+        if _relaxing(r):  # at steady state too
+            same = [
+                j
+                for j in range(d.n_traces)
+                if (d.normal_load_n[j], d.amplitude_fraction[j], d.pull_speed_m_s[j]) == op
+            ]
+            steady = [steady_friction_ratio(r, j)["estimate"] for j in same]
+            line += f" at the window's start, {np.mean(steady):.4f} at steady state"
+        lines.append(line)
     lines.append(
         "[[Multi-start]]  (each start a short joint fit, RSS at phi = 0; the lowest is then "
         "taken to convergence)"

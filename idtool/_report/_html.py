@@ -185,7 +185,7 @@ def _model_line(fit) -> str:
     m = fit.model
     line = (
         f"{m.law.name} friction, {m.coupling.name} coupling, {m.actuator.name} actuator, "
-        f"{m.offset.name} load-cell offset"
+        f"{m.offset.name} load-cell offset, {m.level.name} levels"
     )
     if fit.alternates:
         weights = {w["law"]: w["bic_weight"] for w in fit.doc.get("coupling_laws", [])}

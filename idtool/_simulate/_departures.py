@@ -23,9 +23,11 @@ moderate, realistic size:
 * ``"all"``: scatter, actuator, mains60, drift and coupling together (a paper-like bench:
   the paper's lab is on 60 Hz mains). Not the ceiling coupling (a bench has one coupling
   law), nor the fading horn nor the creeping level: the
-  coverage studies run "all" as a bench the fit's model should still cover, and those two
-  move the levels within their plateaus, which no model option of the fit represents
-  (the fit warns of them instead, :mod:`idtool._fit._plateau_drift`).
+  coverage studies run "all" as a bench the fit's model should still cover without the
+  level models, and those two move the levels within their plateaus, which only the
+  level models the fit tries when its plateaus drift represent
+  (:mod:`idtool._model._level_model`; the fit warns of them too,
+  :mod:`idtool._fit._plateau_drift`).
 
 The true contact and coupling (mu, Kt, gain and load scale) are drawn from ``seed`` in
 narrow ranges around the example's values (below), the same for every kind, so a coverage
@@ -59,8 +61,9 @@ __all__ = [
 # The departures the fit's model options cover (the coverage studies score these).
 DEPARTURE_KINDS = ("clean", "scatter", "actuator", "mains60", "drift", "coupling", "all")
 # Levels that move within their plateaus: the fit detects them and warns
-# (idtool._fit._plateau_drift), but no model option represents them yet, so their bands
-# are not expected to cover (the fading horn's held-out FR falls outside).
+# (idtool._fit._plateau_drift), then models them with the relaxing ON level and the
+# creeping level (idtool._model._level_model); their coverage is scored apart
+# (tests/test_coverage_fading.py), since the steady fit alone does not cover them.
 DRIFT_KINDS = ("fading", "creep")
 # What "all" turns on (module docstring).
 ALL_KINDS = frozenset(DEPARTURE_KINDS) - {"clean", "all"}

@@ -108,9 +108,12 @@ def faded_force_n(
     depth = off_n - on_n
     if depth <= 0.0:  # no reduction: nothing to fade
         return force_n
-    # before the switch-on the force is below OFF only in the start-up: no ON dip there
-    covered = np.where(np.asarray(time_s) >= horn_on_s[0], (off_n - force_n) / depth, 0.0)
-    return off_n - covered * (off_n - on_over_time_n)
+    # before the switch-on the force is below OFF only in the start-up (and 0 before the
+    # pull): no ON dip there, the force is the constant-level one. (Until issue 26's item 4
+    # it was OFF there, so the fading benches had no start-up and read OFF before the pull.)
+    after = np.asarray(time_s) >= horn_on_s[0]
+    covered = (off_n - force_n) / depth
+    return np.where(after, off_n - covered * (off_n - on_over_time_n), force_n)
 
 
 def creep_factor(time_s: np.ndarray, pull_start_s: float, rate_per_s: float) -> np.ndarray:
