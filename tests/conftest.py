@@ -1,4 +1,6 @@
-"""Shared test set-up: 64-bit JAX (importing idtool turns it on) and a headless backend."""
+"""Shared test set-up: 64-bit JAX (importing idtool turns it on), a headless backend,
+when compiled programs are dropped, and the order in which two xdist workers take the
+files."""
 
 import gc
 import os
@@ -19,17 +21,122 @@ import idtool  # noqa: F401  (enables jax_enable_x64)
 assert jax.config.jax_enable_x64, "idtool must switch JAX to 64-bit floats"
 
 
+def _memory_mappings() -> int | None:
+    """This process's memory mappings (Linux), else None."""
+    try:
+        with open("/proc/self/maps", "rb") as f:
+            return sum(1 for _ in f)
+    except OSError:
+        return None
+
+
+def _mapping_limit() -> int:
+    try:
+        with open("/proc/sys/vm/max_map_count") as f:
+            return int(f.read())
+    except (OSError, ValueError):
+        return 65530  # the kernel's default
+
+
+# Drop the compiled programs once a worker holds 40% of the kernel's mapping limit
+# (26 212 of the default 65 530): the largest module added 12 647 mappings to a clean
+# worker, so the next module cannot reach the limit. Below it, programs are kept from
+# one module to the next, which reuse them (the same designs and models).
+CLEAR_AT_MAPPINGS = int(0.4 * _mapping_limit())
+
+
 @pytest.fixture(autouse=True, scope="module")
 def _release_compiled_programs():
-    """Drop JAX's compiled programs after each test module.
+    """Drop JAX's compiled programs after a test module when the worker holds many.
 
     An xdist worker runs many modules in one process, and every compiled XLA program
-    keeps its code mapped: a worker reached 49 945 memory mappings of the kernel's
-    65 530 (``vm.max_map_count``), where ``mmap`` fails and XLA's compiler crashes the
-    worker (segfault or abort inside ``backend_compile_and_load``, three fresh-clone runs
-    lost a worker that way). Modules share few programs (their data shapes differ), so
-    recompiling those costs little.
+    keeps its code mapped: a worker that never dropped them reached 49 945 memory
+    mappings of the kernel's 65 530 (``vm.max_map_count``), where ``mmap`` fails and
+    XLA's compiler crashes the worker (segfault or abort inside
+    ``backend_compile_and_load``, three fresh-clone runs lost a worker that way). They
+    are dropped at :data:`CLEAR_AT_MAPPINGS`, and after every module where the count
+    cannot be read (no ``/proc``).
     """
     yield
-    jax.clear_caches()
-    gc.collect()
+    count = _memory_mappings()
+    if count is None or count >= CLEAR_AT_MAPPINGS:
+        jax.clear_caches()
+        gc.collect()
+
+
+# --- xdist: which worker takes what, and in which order ---------------------------------
+#
+# ``--dist loadfile`` (the Makefile's) gives each worker whole units, in the order they
+# were collected: the module and session fixtures (a fit, a posterior) run once per
+# worker. Compilation is most of a first fit (the example's default fit: 25 s cold, 4 s
+# again in the same process), and a worker keeps its compiled programs from one module
+# to the next (above), so the files that fit benches of the same shapes (the same
+# designs, the same models) are one unit: one worker compiles their programs once, and
+# the session's fitted benches (tests/bench_bank.py) are fitted once. The run ends when
+# the slower worker does, so the units go heaviest first (longest processing time
+# first: the light ones fill in at the end). The files of SPLIT_BY_PARAMETER are split by
+# their parameter, each value a unit of its own: their tests share no fixture, and one
+# file alone would hold a worker for minutes.
+GROUPS: dict[str, tuple[str, ...]] = {}
+SPLIT_BY_PARAMETER = ("tests/test_notebooks.py",)
+# Seconds a file takes on one of two busy cores (measured; a split file's total). Only
+# the order depends on them: a stale figure costs balance, never a test.
+FILE_SECONDS: dict[str, float] = {}
+_GROUP_OF = {path: name for name, paths in GROUPS.items() for path in paths}
+
+
+def work_unit(nodeid: str) -> str:
+    """The unit of ``nodeid`` a worker takes whole: its group of :data:`GROUPS`, else its
+    file, or its file and parameter for the files of :data:`SPLIT_BY_PARAMETER`."""
+    path = nodeid.split("::", 1)[0]
+    if path in _GROUP_OF:
+        return _GROUP_OF[path]
+    if path in SPLIT_BY_PARAMETER and nodeid.endswith("]") and "[" in nodeid:
+        return f"{path}[{nodeid[nodeid.index('[') + 1 : -1]}]"
+    return path
+
+
+def _unit_seconds(nodeids: list[str]) -> dict[str, float]:
+    """Estimated seconds of each unit: a file's seconds shared among its units."""
+    units_of: dict[str, set[str]] = {}
+    for nodeid in nodeids:
+        units_of.setdefault(nodeid.split("::", 1)[0], set()).add(work_unit(nodeid))
+    seconds: dict[str, float] = {}
+    for path, units in units_of.items():
+        for unit in units:
+            share = FILE_SECONDS.get(path, 1.0) / len(units)
+            seconds[unit] = seconds.get(unit, 0.0) + share
+    return seconds
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(config, items):
+    """Heaviest unit first (:data:`FILE_SECONDS`); a unit's tests together, in their
+    order. Every process collects the same items, so all sort alike."""
+    first: dict[str, int] = {}
+    for i, item in enumerate(items):
+        first.setdefault(work_unit(item.nodeid), i)
+    seconds = _unit_seconds([item.nodeid for item in items])
+    items.sort(key=lambda item: (-seconds[work_unit(item.nodeid)], first[work_unit(item.nodeid)]))
+
+
+def pytest_configure(config):
+    if config.pluginmanager.hasplugin("xdist"):
+        config.pluginmanager.register(_UnitsHeaviestFirst(), "idtool-units-heaviest-first")
+
+
+class _UnitsHeaviestFirst:
+    @pytest.hookimpl(tryfirst=True)
+    def pytest_xdist_make_scheduler(self, config, log):
+        """``--dist loadfile`` with the units of :func:`work_unit`, taken in the order
+        collected (sorted above) rather than by their number of tests."""
+        if config.getvalue("dist") != "loadfile":
+            return None
+        from xdist.scheduler import LoadScopeScheduling
+
+        class UnitsHeaviestFirst(LoadScopeScheduling):
+            def _split_scope(self, nodeid: str) -> str:
+                return work_unit(nodeid)
+
+        config.option.loadscopereorder = False
+        return UnitsHeaviestFirst(config, log)
