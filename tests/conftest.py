@@ -3,7 +3,9 @@ when compiled programs are dropped, and the order in which two xdist workers tak
 files."""
 
 import gc
+import json
 import os
+from pathlib import Path
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 # No on-disk compilation cache in tests (the CLI turns it on when ``main`` runs): it did
@@ -16,7 +18,7 @@ os.environ["IDTOOL_CACHE_DIR"] = ""
 import jax
 import pytest
 
-import idtool  # noqa: F401  (enables jax_enable_x64)
+import idtool  # (importing it enables jax_enable_x64)
 
 assert jax.config.jax_enable_x64, "idtool must switch JAX to 64-bit floats"
 
@@ -64,6 +66,35 @@ def _release_compiled_programs():
         gc.collect()
 
 
+# --- the bank: fitted benches that several test files read -----------------------------
+#
+# Session-scoped (so once per xdist worker; the files that read them are one unit of
+# :data:`GROUPS`, so one worker fits each). Read-only: a test that writes into one copies
+# it first.
+
+
+@pytest.fixture(scope="session")
+def small_fit_folder(tmp_path_factory) -> Path:
+    """``fits/small`` as ``idtool fit`` writes it, from the cached fit of seed 1 of the
+    small design (``sample_helpers.small_fit``: 270 and 670 N x 50 and 70%, ON 1 s and
+    2 s, 8 traces; the noise-only model). Read by tests/test_predict.py and
+    tests/test_arviz.py."""
+    from sample_helpers import small_fit
+
+    from idtool._fit._store import save_fit_state
+    from idtool._report._fit_text import fit_json
+
+    dataset, run = small_fit(1)
+    root = tmp_path_factory.mktemp("bank-small")
+    data_dir = idtool.write_dataset(dataset, root / "data")
+    out = root / "fits" / "small"
+    out.mkdir(parents=True)
+    doc = fit_json(run, str(data_dir.resolve()), ["fit", str(data_dir), "--out", str(out)])
+    (out / "fit.json").write_text(json.dumps(doc))
+    save_fit_state(out, run.chosen)
+    return out
+
+
 # --- xdist: which worker takes what, and in which order ---------------------------------
 #
 # ``--dist loadfile`` (the Makefile's) gives each worker whole units, in the order they
@@ -77,7 +108,20 @@ def _release_compiled_programs():
 # first: the light ones fill in at the end). The files of SPLIT_BY_PARAMETER are split by
 # their parameter, each value a unit of its own: their tests share no fixture, and one
 # file alone would hold a worker for minutes.
-GROUPS: dict[str, tuple[str, ...]] = {}
+GROUPS: dict[str, tuple[str, ...]] = {
+    # the example's design (the paper's 24-trace matrix): its default fit, and the
+    # departure benches of the coverage test on the same matrix
+    "the paper's matrix": (
+        "tests/test_api.py",
+        "tests/test_coverage.py",
+        "tests/test_fit.py",
+        "tests/test_sample_until_converged.py",
+    ),
+    # sample_helpers.small_params: the bank's small fit, its posteriors
+    "the small design": ("tests/test_arviz.py", "tests/test_predict.py", "tests/test_sample.py"),
+    # 270 and 670 N x 50 and 70%, one 2 s ON window, 3 s sliding either side: 4 traces
+    "four traces": ("tests/test_report.py", "tests/test_validate_fit.py"),
+}
 SPLIT_BY_PARAMETER = ("tests/test_notebooks.py",)
 # Seconds a file takes on one of two busy cores (measured; a split file's total). Only
 # the order depends on them: a stale figure costs balance, never a test.
