@@ -109,18 +109,19 @@ def small_fit_folder(tmp_path_factory) -> Path:
 # their parameter, each value a unit of its own: their tests share no fixture, and one
 # file alone would hold a worker for minutes.
 GROUPS: dict[str, tuple[str, ...]] = {
-    # the example's design (the paper's 24-trace matrix): its default fit, and the
-    # departure benches of the coverage test on the same matrix
+    # the example's design (the paper's 24-trace matrix): its default fit and posterior,
+    # and the departure benches of the coverage test on the same matrix
     "the paper's matrix": (
         "tests/test_api.py",
         "tests/test_coverage.py",
-        "tests/test_fit.py",
         "tests/test_sample_until_converged.py",
     ),
     # sample_helpers.small_params: the bank's small fit, its posteriors
     "the small design": ("tests/test_arviz.py", "tests/test_predict.py", "tests/test_sample.py"),
     # 270 and 670 N x 50 and 70%, one 2 s ON window, 3 s sliding either side: 4 traces
-    "four traces": ("tests/test_report.py", "tests/test_validate_fit.py"),
+    # (test_fit fits the example too, but compiles it afresh anyway: it checks which
+    # programs a fit compiles, from cleared caches)
+    "four traces": ("tests/test_fit.py", "tests/test_report.py", "tests/test_validate_fit.py"),
 }
 SPLIT_BY_PARAMETER = ("tests/test_notebooks.py",)
 # Seconds a file takes on one of two busy cores (measured; a split file's total). Only
