@@ -124,9 +124,45 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "four traces": ("tests/test_fit.py", "tests/test_report.py", "tests/test_validate_fit.py"),
 }
 SPLIT_BY_PARAMETER = ("tests/test_notebooks.py",)
-# Seconds a file takes on one of two busy cores (measured; a split file's total). Only
-# the order depends on them: a stale figure costs balance, never a test.
-FILE_SECONDS: dict[str, float] = {}
+# Seconds a file takes (a split file's total; or a unit's own, by its name), measured
+# with --durations in a full run on two busy cores (2026-11-24, about 3.5 times the
+# uncontended time), after this file's changes where they changed it. Only the order
+# depends on them: a stale figure costs balance, never a test; a file not listed is
+# taken as light, and goes last.
+FILE_SECONDS: dict[str, float] = {
+    "tests/test_api.py": 645,
+    "tests/test_compare.py": 550,
+    "tests/test_coverage.py": 370,
+    "tests/test_notebooks.py[02_fit_new_material]": 285,
+    "tests/test_notebooks.py[03_uncertainty_design_maps]": 210,
+    "tests/test_notebooks.py[01_seed_model]": 125,
+    "tests/test_sample_until_converged.py": 300,
+    "tests/test_coupling_sdof.py": 300,
+    "tests/test_coupling_laws.py": 290,
+    "tests/test_transducer.py": 250,
+    "tests/test_server.py": 220,
+    "tests/test_sample.py": 200,
+    "tests/test_parameter_settings.py": 190,
+    "tests/test_variability.py": 180,
+    "tests/test_plateau_drift.py": 160,
+    "tests/test_arviz.py": 150,
+    "tests/test_report.py": 120,
+    "tests/test_fit.py": 120,
+    "tests/test_validate_fit.py": 100,
+    "tests/test_lm.py": 90,
+    "tests/test_offset.py": 75,
+    "tests/test_cli_model.py": 65,
+    "tests/test_coupling_load_power.py": 55,
+    "tests/test_predict.py": 40,
+    "tests/test_priors.py": 35,
+    "tests/test_table_fast.py": 35,
+    "tests/test_mains.py": 20,
+    "tests/test_departures.py": 20,
+    "tests/test_actuator.py": 15,
+    "tests/test_simulate.py": 15,
+    "tests/test_contact.py": 15,
+    "tests/test_import.py": 15,
+}
 _GROUP_OF = {path: name for name, paths in GROUPS.items() for path in paths}
 
 
@@ -142,14 +178,15 @@ def work_unit(nodeid: str) -> str:
 
 
 def _unit_seconds(nodeids: list[str]) -> dict[str, float]:
-    """Estimated seconds of each unit: a file's seconds shared among its units."""
+    """Estimated seconds of each unit: its own figure, else its files' (a split file's
+    shared among its units), summed over a group's files."""
     units_of: dict[str, set[str]] = {}
     for nodeid in nodeids:
         units_of.setdefault(nodeid.split("::", 1)[0], set()).add(work_unit(nodeid))
     seconds: dict[str, float] = {}
     for path, units in units_of.items():
         for unit in units:
-            share = FILE_SECONDS.get(path, 1.0) / len(units)
+            share = FILE_SECONDS.get(unit, FILE_SECONDS.get(path, 1.0) / len(units))
             seconds[unit] = seconds.get(unit, 0.0) + share
     return seconds
 
