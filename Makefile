@@ -43,8 +43,11 @@ bench: $(STAMP)
 # The defaults on every departure kind of the simulator, 3 seeds each (8 min on 2 cores,
 # plus up to 10 per fading-horn bench): run it before closing an issue that touches the
 # fit, the likelihood or the sampler, and quote its table (benchmarks/study_departures.py).
+# Then the coverage test on all 3 seeds per kind, with the rates that `make test` (one
+# seed per kind) leaves to it (tests/test_coverage.py; about 7 min on one core).
 study: $(STAMP)
 	$(BIN)/python benchmarks/study_departures.py --seeds 3
+	IDTOOL_COVERAGE_SEEDS=3 MPLBACKEND=Agg $(BIN)/python -m pytest tests/test_coverage.py -s
 
 clean-venv:
 	rm -rf $(VENV)

@@ -1,7 +1,11 @@
-"""Shared test set-up: 64-bit JAX (importing idtool turns it on) and a headless backend."""
+"""Shared test set-up: 64-bit JAX (importing idtool turns it on), a headless backend,
+when compiled programs are dropped, and the order in which two xdist workers take the
+files."""
 
 import gc
+import json
 import os
+from pathlib import Path
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 # No on-disk compilation cache in tests (the CLI turns it on when ``main`` runs): it did
@@ -14,22 +18,207 @@ os.environ["IDTOOL_CACHE_DIR"] = ""
 import jax
 import pytest
 
-import idtool  # noqa: F401  (enables jax_enable_x64)
+import idtool  # (importing it enables jax_enable_x64)
 
 assert jax.config.jax_enable_x64, "idtool must switch JAX to 64-bit floats"
 
 
+def _memory_mappings() -> int | None:
+    """This process's memory mappings (Linux), else None."""
+    try:
+        with open("/proc/self/maps", "rb") as f:
+            return sum(1 for _ in f)
+    except OSError:
+        return None
+
+
+def _mapping_limit() -> int:
+    try:
+        with open("/proc/sys/vm/max_map_count") as f:
+            return int(f.read())
+    except (OSError, ValueError):
+        return 65530  # the kernel's default
+
+
+# Drop the compiled programs once a worker holds 40% of the kernel's mapping limit
+# (26 212 of the default 65 530): the largest module added 12 647 mappings to a clean
+# worker, so the next module cannot reach the limit. Below it, programs are kept from
+# one module to the next, which reuse them (the same designs and models).
+CLEAR_AT_MAPPINGS = int(0.4 * _mapping_limit())
+
+
 @pytest.fixture(autouse=True, scope="module")
 def _release_compiled_programs():
-    """Drop JAX's compiled programs after each test module.
+    """Drop JAX's compiled programs after a test module when the worker holds many.
 
     An xdist worker runs many modules in one process, and every compiled XLA program
-    keeps its code mapped: a worker reached 49 945 memory mappings of the kernel's
-    65 530 (``vm.max_map_count``), where ``mmap`` fails and XLA's compiler crashes the
-    worker (segfault or abort inside ``backend_compile_and_load``, three fresh-clone runs
-    lost a worker that way). Modules share few programs (their data shapes differ), so
-    recompiling those costs little.
+    keeps its code mapped: a worker that never dropped them reached 49 945 memory
+    mappings of the kernel's 65 530 (``vm.max_map_count``), where ``mmap`` fails and
+    XLA's compiler crashes the worker (segfault or abort inside
+    ``backend_compile_and_load``, three fresh-clone runs lost a worker that way). They
+    are dropped at :data:`CLEAR_AT_MAPPINGS`, and after every module where the count
+    cannot be read (no ``/proc``).
     """
     yield
-    jax.clear_caches()
-    gc.collect()
+    count = _memory_mappings()
+    if count is None or count >= CLEAR_AT_MAPPINGS:
+        jax.clear_caches()
+        gc.collect()
+
+
+# --- the bank: fitted benches that several test files read -----------------------------
+#
+# Session-scoped (so once per xdist worker; the files that read them are one unit of
+# :data:`GROUPS`, so one worker fits each). Read-only: a test that writes into one copies
+# it first.
+
+
+@pytest.fixture(scope="session")
+def small_fit_folder(tmp_path_factory) -> Path:
+    """``fits/small`` as ``idtool fit`` writes it, from the cached fit of seed 1 of the
+    small design (``sample_helpers.small_fit``: 270 and 670 N x 50 and 70%, ON 1 s and
+    2 s, 8 traces; the noise-only model). Read by tests/test_predict.py and
+    tests/test_arviz.py."""
+    from sample_helpers import small_fit
+
+    from idtool._fit._store import save_fit_state
+    from idtool._report._fit_text import fit_json
+
+    dataset, run = small_fit(1)
+    root = tmp_path_factory.mktemp("bank-small")
+    data_dir = idtool.write_dataset(dataset, root / "data")
+    out = root / "fits" / "small"
+    out.mkdir(parents=True)
+    doc = fit_json(run, str(data_dir.resolve()), ["fit", str(data_dir), "--out", str(out)])
+    (out / "fit.json").write_text(json.dumps(doc))
+    save_fit_state(out, run.chosen)
+    return out
+
+
+# --- xdist: which worker takes what, and in which order ---------------------------------
+#
+# ``--dist loadfile`` (the Makefile's) gives each worker whole units, in the order they
+# were collected: the module and session fixtures (a fit, a posterior) run once per
+# worker. Compilation is most of a first fit (the example's default fit: 25 s cold, 4 s
+# again in the same process), and a worker keeps its compiled programs from one module
+# to the next (above), so the files that fit benches of the same shapes (the same
+# designs, the same models) are one unit: one worker compiles their programs once, and
+# the session's fitted benches (tests/bench_bank.py) are fitted once. The run ends when
+# the slower worker does, so the units go heaviest first (longest processing time
+# first: the light ones fill in at the end). The files of SPLIT_BY_PARAMETER are split by
+# their parameter, each value a unit of its own: their tests share no fixture, and one
+# file alone would hold a worker for minutes.
+GROUPS: dict[str, tuple[str, ...]] = {
+    # the example's design (the paper's 24-trace matrix): its default fit and posterior,
+    # and the departure benches of the coverage test on the same matrix
+    "the paper's matrix": (
+        "tests/test_api.py",
+        "tests/test_coverage.py",
+        "tests/test_sample_until_converged.py",
+    ),
+    # sample_helpers.small_params: the bank's small fit, its posteriors
+    "the small design": ("tests/test_arviz.py", "tests/test_predict.py", "tests/test_sample.py"),
+    # 270 and 670 N x 50 and 70%, one 2 s ON window, 3 s sliding either side: 4 traces
+    # (test_fit fits the example too, but compiles it afresh anyway: it checks which
+    # programs a fit compiles, from cleared caches)
+    "four traces": ("tests/test_fit.py", "tests/test_report.py", "tests/test_validate_fit.py"),
+}
+SPLIT_BY_PARAMETER = ("tests/test_notebooks.py",)
+# Seconds a file takes (a split file's total; or a unit's own, by its name), measured
+# with --durations in a full run on two busy cores (2026-11-24, about 3.5 times the
+# uncontended time), after this file's changes where they changed it. Only the order
+# depends on them: a stale figure costs balance, never a test; a file not listed is
+# taken as light, and goes last.
+FILE_SECONDS: dict[str, float] = {
+    "tests/test_api.py": 645,
+    "tests/test_compare.py": 550,
+    "tests/test_coverage.py": 370,
+    "tests/test_notebooks.py[02_fit_new_material]": 285,
+    "tests/test_notebooks.py[03_uncertainty_design_maps]": 210,
+    "tests/test_notebooks.py[01_seed_model]": 125,
+    "tests/test_sample_until_converged.py": 300,
+    "tests/test_coupling_sdof.py": 300,
+    "tests/test_coupling_laws.py": 290,
+    "tests/test_transducer.py": 250,
+    "tests/test_server.py": 220,
+    "tests/test_sample.py": 200,
+    "tests/test_parameter_settings.py": 190,
+    "tests/test_variability.py": 180,
+    "tests/test_plateau_drift.py": 160,
+    "tests/test_arviz.py": 150,
+    "tests/test_report.py": 120,
+    "tests/test_fit.py": 120,
+    "tests/test_validate_fit.py": 100,
+    "tests/test_lm.py": 90,
+    "tests/test_offset.py": 75,
+    "tests/test_cli_model.py": 65,
+    "tests/test_coupling_load_power.py": 55,
+    "tests/test_predict.py": 40,
+    "tests/test_priors.py": 35,
+    "tests/test_table_fast.py": 35,
+    "tests/test_mains.py": 20,
+    "tests/test_departures.py": 20,
+    "tests/test_actuator.py": 15,
+    "tests/test_simulate.py": 15,
+    "tests/test_contact.py": 15,
+    "tests/test_import.py": 15,
+}
+_GROUP_OF = {path: name for name, paths in GROUPS.items() for path in paths}
+
+
+def work_unit(nodeid: str) -> str:
+    """The unit of ``nodeid`` a worker takes whole: its group of :data:`GROUPS`, else its
+    file, or its file and parameter for the files of :data:`SPLIT_BY_PARAMETER`."""
+    path = nodeid.split("::", 1)[0]
+    if path in _GROUP_OF:
+        return _GROUP_OF[path]
+    if path in SPLIT_BY_PARAMETER and nodeid.endswith("]") and "[" in nodeid:
+        return f"{path}[{nodeid[nodeid.index('[') + 1 : -1]}]"
+    return path
+
+
+def _unit_seconds(nodeids: list[str]) -> dict[str, float]:
+    """Estimated seconds of each unit: its own figure, else its files' (a split file's
+    shared among its units), summed over a group's files."""
+    units_of: dict[str, set[str]] = {}
+    for nodeid in nodeids:
+        units_of.setdefault(nodeid.split("::", 1)[0], set()).add(work_unit(nodeid))
+    seconds: dict[str, float] = {}
+    for path, units in units_of.items():
+        for unit in units:
+            share = FILE_SECONDS.get(unit, FILE_SECONDS.get(path, 1.0) / len(units))
+            seconds[unit] = seconds.get(unit, 0.0) + share
+    return seconds
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(config, items):
+    """Heaviest unit first (:data:`FILE_SECONDS`); a unit's tests together, in their
+    order. Every process collects the same items, so all sort alike."""
+    first: dict[str, int] = {}
+    for i, item in enumerate(items):
+        first.setdefault(work_unit(item.nodeid), i)
+    seconds = _unit_seconds([item.nodeid for item in items])
+    items.sort(key=lambda item: (-seconds[work_unit(item.nodeid)], first[work_unit(item.nodeid)]))
+
+
+def pytest_configure(config):
+    if config.pluginmanager.hasplugin("xdist"):
+        config.pluginmanager.register(_UnitsHeaviestFirst(), "idtool-units-heaviest-first")
+
+
+class _UnitsHeaviestFirst:
+    @pytest.hookimpl(tryfirst=True)
+    def pytest_xdist_make_scheduler(self, config, log):
+        """``--dist loadfile`` with the units of :func:`work_unit`, taken in the order
+        collected (sorted above) rather than by their number of tests."""
+        if config.getvalue("dist") != "loadfile":
+            return None
+        from xdist.scheduler import LoadScopeScheduling
+
+        class UnitsHeaviestFirst(LoadScopeScheduling):
+            def _split_scope(self, nodeid: str) -> str:
+                return work_unit(nodeid)
+
+        config.option.loadscopereorder = False
+        return UnitsHeaviestFirst(config, log)

@@ -9,11 +9,13 @@ the per-trace terms plus the log prior must give the sampler's own log-posterior
 import json
 import shutil
 import warnings
+from pathlib import Path
 
 import arviz as az
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from sample_helpers import small_params
 from scipy.stats import multivariate_normal
 
 import idtool
@@ -24,18 +26,7 @@ from idtool._posterior._levels import _mean_and_cholesky, build_levels_target, l
 from idtool._posterior._prior import default_prior
 
 
-def _fit(tmp_path_factory, name: str, *fit_args: str):
-    root = tmp_path_factory.mktemp(name)
-    params = json.loads(idtool.example_params_path().read_text())
-    params["experiments"]["normal_loads_n"] = [270.0, 670.0]
-    params["experiments"]["on_durations_s"] = [1.0, 2.0]  # two pulls per operating point
-    dataset, _ = idtool.simulate_bench(params, seed=5)
-    data = idtool.write_dataset(dataset, root / "data")
-    out = root / "fit"
-    # one actuator and offset model, not the BIC choice among four: the groups do not
-    # depend on it, and CI time does
-    fixed = ["--actuator", "slope", "--offset", "constant"]
-    assert main(["fit", str(data), "--out", str(out), "-q", *fixed, *fit_args]) == 0
+def _sample(out: Path) -> Path:
     argv = ["sample", str(out), "--walkers", "20", "--steps", "160", "--no-progress", "-q"]
     assert main(argv) in (0, 3)  # 3: too short to converge; the groups are written anyway
     return out
@@ -43,12 +34,24 @@ def _fit(tmp_path_factory, name: str, *fit_args: str):
 
 @pytest.fixture(scope="module")
 def levels(tmp_path_factory):
-    return _fit(tmp_path_factory, "levels")
+    """The small design (two pulls per operating point) of seed 5, the levels model."""
+    root = tmp_path_factory.mktemp("levels")
+    dataset, _ = idtool.simulate_bench(small_params(), seed=5)
+    data = idtool.write_dataset(dataset, root / "data")
+    out = root / "fit"
+    # one actuator and offset model, not the BIC choice among four: the groups do not
+    # depend on it, and CI time does
+    fixed = ["--actuator", "slope", "--offset", "constant"]
+    assert main(["fit", str(data), "--out", str(out), "-q", *fixed]) == 0
+    return _sample(out)
 
 
 @pytest.fixture(scope="module")
-def noise_only(tmp_path_factory):
-    return _fit(tmp_path_factory, "noise", "--variability", "off")
+def noise_only(small_fit_folder, tmp_path_factory):
+    """The bank's noise-only fit of the small design (tests/conftest.py), copied."""
+    out = tmp_path_factory.mktemp("noise") / "fit"
+    shutil.copytree(small_fit_folder, out)
+    return _sample(out)
 
 
 def test_thinning_keeps_the_last_step_and_at_most_max_draws():

@@ -4,11 +4,12 @@ Recovering the truth from the fit's own simulator proves little, so every datase
 has a departure the fit does not assume (idtool._simulate._departures): pull-to-pull
 scatter, a lagging rate-limited actuator, 60 Hz mains at 2 kHz, offset drift, a coupling
 law the fit does not ship, and all of them together; plus clean data, where the bands
-must not widen. 7 kinds x 3 seeds = 21 datasets on the paper's matrix (24 traces), each
-fitted with the defaults a new user gets (``idtool.fit(dataset)``), and scored against
-the truth. Every dataset has its own seed (kind k takes seeds 3k+1 to 3k+3): the seed
-draws the truth and the noise, and kinds sharing seeds would share noise realisations,
-so one unlucky realisation would count as several misses (seed 1's mu estimate sits
+must not widen. The study is 7 kinds x 3 seeds = 21 datasets on the paper's matrix (24
+traces), each fitted with the defaults a new user gets (``idtool.fit(dataset)``), and
+scored against the truth. Every dataset has its own seed (kind k of ``DEPARTURE_KINDS``
+takes seeds 3k+1 to 3k+3; a kind added there is picked up): the seed draws the truth
+and the noise, and kinds sharing seeds would share noise realisations, so one unlucky
+realisation would count as several misses (seed 1's mu estimate sits
 2.5 standard errors low on the clean, scatter and drift benches alike; on 11 clean seeds
 the z-scores of mu have an rms of 1.1, so it is chance, counted three times).
 
@@ -29,11 +30,28 @@ the z-scores of mu have an rms of 1.1, so it is chance, counted three times).
   model on the benches whose actuator is the slope model and nothing blurs the switches,
   and the constant offset wherever the offset does not drift.
 
-The fits take about 7 minutes on one core: marked slow, still part of the default run.
+What runs where. ``make test`` (CI) fits one dataset per kind, the first of its three
+seeds (3k+1), and checks what each dataset must show on its own: the last three points
+(precision, useful bands, bench models) and the coupling flag below, each as one test
+per kind. The rates (the first three points: held-out FR, new pulls, Kt and mu) are
+properties of the 21-dataset study and run in ``make study``
+(``IDTOOL_COVERAGE_SEEDS=3``), with their thresholds unchanged: on 7 datasets they
+would not be tests. The points of one dataset share its fit, so its 6 held-out points
+hit or miss together; even counted as independent, at the nominal 95% the chance of 5
+or more misses of 42 (below 90%) is 6% (of 13 of the study's 126: 1%), of a kind below
+5 of its 6 points 3% (21% that one of 7 kinds is; below 15 of 18: 1%), and at the
+measured miss rates (Kt 2 of 21, mu 3 of 21) 2 misses of 7 (below 85%) come 14% and 26%
+of the time. Thresholds that held at that size would be loosened beyond use, so CI
+checks the per-dataset properties only.
+
+The study's 21 fits take about 7 minutes on one core, CI's 7 about 2.5: marked slow,
+still part of the default run.
 """
 
 from __future__ import annotations
 
+import functools
+import os
 import warnings
 
 import numpy as np
@@ -46,12 +64,22 @@ from idtool._simulate._simulate import true_friction_ratio
 
 pytestmark = pytest.mark.slow
 
-SEEDS_PER_KIND = 3
+STUDY_SEEDS_PER_KIND = 3  # the study: kind k takes seeds 3k+1 to 3k+3
+# CI runs the first seed of each kind; make study all three (module docstring)
+SEEDS_PER_KIND = int(os.environ.get("IDTOOL_COVERAGE_SEEDS", "1"))
 HELD_OUT = ([360.0, 560.0], [0.5, 0.6, 0.7])
 MATRIX = ([270.0, 450.0, 670.0], [0.5, 0.7])
 NEW_PULLS = 50
 
 
+def seeds_of(kind: str) -> list[int]:
+    """The seeds of ``kind`` that this run scores: the first ``SEEDS_PER_KIND`` of its
+    three (a kind's seeds do not depend on how many run)."""
+    k = DEPARTURE_KINDS.index(kind)
+    return [STUDY_SEEDS_PER_KIND * k + s for s in range(1, SEEDS_PER_KIND + 1)]
+
+
+@functools.cache
 def _score(kind: str, seed: int) -> dict:
     params = departure_params(kind, seed)
     dataset, _ = idtool.simulate_bench(params, seed=seed)
@@ -94,13 +122,23 @@ def _score(kind: str, seed: int) -> dict:
     return out
 
 
+# the per-dataset checks: one test per kind, each scoring its own kind's datasets (so
+# the kinds' fits can run on different xdist workers, see tests/conftest.py)
+each_kind = pytest.mark.parametrize("kind", DEPARTURE_KINDS)
+# the rates: the whole study's datasets (module docstring)
+study_only = pytest.mark.skipif(
+    SEEDS_PER_KIND < STUDY_SEEDS_PER_KIND,
+    reason="a rate over the study's 3 seeds per kind: make study (IDTOOL_COVERAGE_SEEDS=3)",
+)
+
+
+def scores_of(kind: str) -> list[dict]:
+    return [_score(kind, seed) for seed in seeds_of(kind)]
+
+
 @pytest.fixture(scope="module")
 def scores() -> list[dict]:
-    out = [
-        _score(kind, SEEDS_PER_KIND * k + s)
-        for k, kind in enumerate(DEPARTURE_KINDS)
-        for s in range(1, SEEDS_PER_KIND + 1)
-    ]
+    out = [s for kind in DEPARTURE_KINDS for s in scores_of(kind)]
     for kind in DEPARTURE_KINDS:  # the table the issue's closing note quotes (pytest -s)
         rows = [s for s in out if s["kind"] == kind]
         inside = sum(sum(s["inside"]) for s in rows)
@@ -115,11 +153,13 @@ def scores() -> list[dict]:
     return out
 
 
+@study_only
 def test_enough_datasets_of_every_kind(scores):
     assert len(scores) >= 20
     assert {s["kind"] for s in scores} == set(DEPARTURE_KINDS)
 
 
+@study_only
 def test_mean_friction_ratio_bands_cover_held_out_points(scores):
     inside = np.concatenate([s["inside"] for s in scores])
     assert inside.mean() >= 0.90, inside.mean()
@@ -128,53 +168,61 @@ def test_mean_friction_ratio_bands_cover_held_out_points(scores):
         assert hits >= 15, (kind, hits)
 
 
+@study_only
 def test_new_trace_bands_hold_new_pulls(scores):
     rate = np.mean([np.mean(s["new_inside"]) for s in scores])
     assert rate >= 0.90, rate
 
 
+@study_only
 def test_kt_interval_covers_the_truth(scores):
     rate = np.mean([s["Kt"] for s in scores])
     assert rate >= 0.85, rate
 
 
+@study_only
 def test_mu_interval_covers_the_truth(scores):
     rate = np.mean([s["mu"] for s in scores])
     assert rate >= 0.85, rate
 
 
-def test_clean_data_keeps_its_precision(scores):
-    for s in scores:
+@each_kind
+def test_clean_data_keeps_its_precision(kind):
+    for s in scores_of(kind):
         if "half_width_noise_only" in s:
             assert s["half_width"] <= 1.2 * s["half_width_noise_only"], s
 
 
-def test_bands_stay_useful(scores):
-    for s in scores:
+@each_kind
+def test_bands_stay_useful(kind):
+    for s in scores_of(kind):
         assert s["half_width"] <= 0.03, s
 
 
-def test_the_lag_actuator_is_found_where_there_is_one(scores):
+@each_kind
+def test_the_lag_actuator_is_found_where_there_is_one(kind):
     # lag on every bench that has one; the slope model on the clean benches, whose
     # actuator is the slope model exactly. (On a scattered bench the nested lag model
     # may win: per-pull FR scatter leaves misfit at the switches that a time constant
     # absorbs; seed 5 does, with its bands and Kt still covering.)
-    for s in scores:
+    for s in scores_of(kind):
         if s["kind"] in ("actuator", "all"):
             assert s["actuator"] == "lag", s
         if s["kind"] in ("clean", "mains60", "drift"):
             assert s["actuator"] == "slope", s
 
 
-def test_clean_benches_keep_the_constant_offset(scores):
-    for s in scores:
+@each_kind
+def test_clean_benches_keep_the_constant_offset(kind):
+    for s in scores_of(kind):
         if s["kind"] in ("clean", "actuator", "mains60", "coupling", "scatter"):
             assert s["offset"] == "constant", s
 
 
-def test_a_coupling_of_another_shape_is_flagged(scores):
+@each_kind
+def test_a_coupling_of_another_shape_is_flagged(kind):
     """Where Kt misses its interval (the truth-only coupling), the report says that Kt
     rests on the coupling law's shape: the discrepancy's interval starts above 3% there
     (0.04-0.08) and nowhere else (at most 0.016)."""
-    for s in scores:
+    for s in scores_of(kind):
         assert s["misspecified"] == (s["kind"] in ("coupling", "all")), s

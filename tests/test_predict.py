@@ -5,30 +5,20 @@ import shutil
 
 import numpy as np
 import pytest
-from sample_helpers import small_fit
 
-import idtool
 from idtool._cli._main import main
-from idtool._fit._store import load_stored_fit, save_fit_state
+from idtool._fit._store import load_stored_fit
 from idtool._posterior._diagnostics import import_arviz
 from idtool._posterior._draws import prediction_draws
 from idtool._predict._amplitude import amplitude_for_reduction
 from idtool._predict._predict import predict_friction_ratio
-from idtool._report._fit_text import fit_json
 
 
 @pytest.fixture(scope="module")
-def fit_folder(tmp_path_factory):
-    """``fits/small`` as ``idtool fit`` writes it, from the cached fit of seed 1."""
-    dataset, run = small_fit(1)
-    root = tmp_path_factory.mktemp("predict")
-    data_dir = idtool.write_dataset(dataset, root / "data")
-    out = root / "fits" / "small"
-    out.mkdir(parents=True)
-    doc = fit_json(run, str(data_dir.resolve()), ["fit", str(data_dir), "--out", str(out)])
-    (out / "fit.json").write_text(json.dumps(doc))
-    save_fit_state(out, run.chosen)
-    return out
+def fit_folder(small_fit_folder):
+    """``fits/small`` as ``idtool fit`` writes it, from the cached fit of seed 1 (the
+    bank's, tests/conftest.py: read-only)."""
+    return small_fit_folder
 
 
 def predict_json(capsys, *args) -> dict:

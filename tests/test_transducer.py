@@ -14,17 +14,23 @@ def vt_for(p, vr):
     return vr * float(p.linear_amplitude_m * p.angular_frequency_rad_s)
 
 
+def _steady_one(p, vr, steps_per_period):
+    vt = vr * p.linear_amplitude_m * p.angular_frequency_rad_s
+    return idtool.transducer_steady_state(p, vt, steps_per_period=steps_per_period)
+
+
+# one compiled program: op by op, each loop of the shooting compiles on its own. Made
+# once, at module level, so every call of the same shape runs the same program (a jit
+# of a closure made inside steady_many was compiled anew at each call: 3 x ~10 s).
+_steady_grid = jax.jit(
+    jax.vmap(jax.vmap(_steady_one, (None, 0, None)), (0, None, None)), static_argnums=2
+)
+
+
 def steady_many(models, vrs, steps_per_period=256):
     """Steady states for a list of transducers at target velocity ratios (vectorised)."""
     batch = jax.tree.map(lambda *xs: jnp.stack([jnp.asarray(x, float) for x in xs]), *models)
-    vrs = jnp.asarray(vrs, float)
-
-    def one(p, vr):
-        vt = vr * p.linear_amplitude_m * p.angular_frequency_rad_s
-        return idtool.transducer_steady_state(p, vt, steps_per_period=steps_per_period)
-
-    # one compiled program: op by op, each loop of the shooting compiles on its own
-    return jax.jit(jax.vmap(jax.vmap(one, (None, 0)), (0, None)))(batch, vrs)
+    return _steady_grid(batch, jnp.asarray(vrs, float), steps_per_period)
 
 
 def test_table2_preset():
@@ -161,8 +167,14 @@ def _fr_of(params):
 
 def test_gradients_match_central_differences():
     x = jnp.array([0.056e6, 0.1, 1920.0])
-    grad = np.asarray(jax.jit(jax.grad(_fr_of))(x))
-    f = jax.jit(_fr_of)
+    # one compiled program for the gradient and the differences' values (a second, of
+    # the value alone, would cost a compilation as long as the test)
+    value_and_grad = jax.jit(jax.value_and_grad(_fr_of))
+    grad = np.asarray(value_and_grad(x)[1])
+
+    def f(z):
+        return value_and_grad(z)[0]
+
     for i in range(3):
         h = 1e-5 * float(x[i])
         fd = (float(f(x.at[i].add(h))) - float(f(x.at[i].add(-h)))) / (2 * h)
