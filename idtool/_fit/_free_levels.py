@@ -7,8 +7,14 @@ block means as the fit. Their estimates ``y`` (log OFF, log FR) and covariance `
 summarise what the traces say about the levels; the bench model is linear in the levels,
 so this summary loses nothing to first order. An ON window too short for the force to
 settle (``MIN_AT_LEVEL_S``) does not measure its ON level: that trace's FR is left out
-(its OFF level stays). Everything here reuses the fit's own linearisation (no new
-program to compile).
+(its OFF level stays). Its ON level is still freed, as a nuisance, wherever the trace
+informs it at all (``INFORMED_ON``): held at the physical model's value, the model's
+error there went into the trace's OFF level. On the departure bench "all" (seed 602, a
+coupling law the fit does not ship and a lag actuator) the block fit's FR was 20-35%
+high at the three ON windows of 1 s that end just short of settling; held there, their
+OFF levels came out 1.3-3.3% high with standard errors 0.6x the honest ones, and mu
+0.8% high, outside its interval; freed, they are within 0.5% of their truths. Everything
+here reuses the fit's own linearisation (no new program to compile).
 """
 
 from __future__ import annotations
@@ -16,16 +22,28 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import jax.numpy as jnp
 import numpy as np
 
 from idtool._fit._program import run_lm
 from idtool._model._benchmodel import BenchModel
 
-__all__ = ["MIN_AT_LEVEL_S", "FreeLevels", "free_levels", "model_log_levels"]
+__all__ = ["INFORMED_ON", "MIN_AT_LEVEL_S", "FreeLevels", "free_levels", "model_log_levels"]
 
 # An ON level counts as measured when the force sits at it for this long (about four
 # 40 ms blocks): shorter, the trace only bounds it (its depth is beyond the slope's reach).
 MIN_AT_LEVEL_S = 0.15
+# An unmeasured ON level is freed (a nuisance, no FR row) when its information in the
+# trace is at least this fraction of the OFF level's. A lag window that ends in the
+# approach to its level gives 0.15-0.5 (departure "all", seed 602); one that ends in the
+# rate-limited fall 0, the slope model's rounded corner (not identifiable, CORNER_N)
+# 1e-8 to 5e-6 (clean, seed 1: freed there, the Gauss-Newton step moved two ON levels by
+# 176 and 294 N). Held below it, the model's value moves the OFF level by at most
+# sqrt(1e-3) = 3% of the value's error.
+INFORMED_ON = 1e-3
+# The free levels' own AR(1) coefficient replaces the fit's when they differ by this much
+# (the fit's own refits stop at the same change, idtool._fit._fit._settle_phi).
+PHI_SETTLED = 0.02
 
 
 @dataclasses.dataclass(frozen=True)
@@ -88,12 +106,33 @@ def free_levels(model: BenchModel, z: np.ndarray, phi: float) -> FreeLevels:
     optimum up to the nuisances' second-order terms (on the example, Levenberg-Marquardt
     run to convergence in ``u`` moved the free FRs by ~1e-4, a twentieth of their
     standard errors; measured while this was written, not a test).
+
+    The AR(1) coefficient is the free levels' own, from their residuals (like the noise
+    sd): the fit's ``phi`` comes from residuals that hold its model's misfit of the
+    levels, which it reads as slow noise. On the departure bench "all" (a coupling law
+    the fit does not ship) the fit's phi was 0.97 and the free levels' 0.75 (residuals
+    1.8 N rms against 0.47 N): at 0.97 the OFF levels' standard errors came out 1.8x
+    their errors' spread and the scatter of mu half its truth, below its interval.
     """
+    z = np.asarray(z, float)
+    free, u = _free_step(model, z, phi)
+    if model.noise.autoregressive:
+        e = np.asarray(model.level_residuals(jnp.asarray(u), jnp.asarray(z), 0.0))
+        own = model.noise.estimate_phi(e, np.asarray(model.data.first))
+        if abs(own - phi) >= PHI_SETTLED:
+            free, _ = _free_step(model, z, own)
+    return free
+
+
+def _free_step(model: BenchModel, z: np.ndarray, phi: float) -> tuple[FreeLevels, np.ndarray]:
+    """:func:`free_levels` at a given ``phi``, and ``u`` at the free optimum."""
     k, m = model.n_physical, model.data.n_traces
     w, lv, _, jtj_u, jtr_u = _linearise(model, z, phi)
     measured = _at_level_s(model, z, lv) >= MIN_AT_LEVEL_S
+    info = np.diag(jtj_u)
+    on_free = measured | (info[m : 2 * m] > INFORMED_ON * info[:m])
     u = np.concatenate([lv, z[k:]])
-    free = np.flatnonzero(np.concatenate([np.ones(m, bool), measured, np.ones(z.size - k, bool)]))
+    free = np.flatnonzero(np.concatenate([np.ones(m, bool), on_free, np.ones(z.size - k, bool)]))
     jtj = jtj_u[np.ix_(free, free)]
     step = np.linalg.solve(jtj, jtr_u[free])
     u[free] -= step
@@ -120,7 +159,7 @@ def free_levels(model: BenchModel, z: np.ndarray, phi: float) -> FreeLevels:
         y=y,
         cov_y=dy @ cov_u @ dy.T,
         sigma_n=math.sqrt(sigma2),
-    )
+    ), u
 
 
 def model_log_levels(model: BenchModel, z: np.ndarray, phi: float):
