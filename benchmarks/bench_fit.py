@@ -555,7 +555,7 @@ def main(repeat: int = 1) -> None:
     zj = jnp.asarray(z_start)
     residuals(zj, phi).block_until_ready()
     jacobian(zj, phi).block_until_ready()
-    coloured(zj, phi)[1].block_until_ready()
+    jax.block_until_ready(coloured(zj, phi)[1])
 
     def lm(z, mask, phi, max_steps):
         return run_lm(model, z, mask, phi, max_steps)
@@ -571,7 +571,7 @@ def main(repeat: int = 1) -> None:
     def micro():
         resid = median_time(lambda: residuals(zj, phi).block_until_ready(), 200)
         jac = median_time(lambda: jacobian(zj, phi).block_until_ready(), 10)
-        col = median_time(lambda: coloured(zj, phi)[1].block_until_ready(), 20)
+        col = median_time(lambda: jax.block_until_ready(coloured(zj, phi)[1]), 20)
         lm(zj, mask, phi, 100).z.block_until_ready()
         run = median_time(lambda: lm(zj, mask, phi, 100).z.block_until_ready(), 5)
         steps = int(lm(zj, mask, phi, 100).steps)

@@ -9,9 +9,11 @@ from scipy.optimize import least_squares
 
 import idtool
 from idtool._data._blocks import prepare_fit_data
+from idtool._fit._arrow import Arrow, DenseNormal
 from idtool._fit._lm import (
     ColouredJacobian,
     ColouredLevenbergMarquardt,
+    arrow_equations,
     coloured_equations,
     levenberg_marquardt,
     levenberg_marquardt_loop,
@@ -57,6 +59,54 @@ def test_normal_equations_equal_the_dense_jacobians_on_a_toy_problem():
     np.testing.assert_allclose(jtr, jac.T @ fn(z), rtol=1e-12, atol=1e-12)
 
 
+def test_arrowhead_blocks_equal_the_dense_normal_equations_on_a_toy_problem():
+    fn, structure = decay_problem()
+    z = jnp.array([0.1, 0.9, 1.8, 0.6, 0.0, 0.1, 0.2])
+    r, arrow = arrow_equations(fn, z, structure)
+    np.testing.assert_array_equal(r, fn(z))
+    _, jtj, jtr = normal_equations(fn, z, structure)
+    assert arrow.d.shape == (GROUPS, 2, 2) and arrow.a.shape == (1, 1)
+    dense_jtj, dense_jtr = arrow.dense()
+    np.testing.assert_allclose(dense_jtj, jtj, rtol=1e-14, atol=1e-14)
+    np.testing.assert_allclose(dense_jtr, jtr, rtol=1e-14, atol=1e-14)
+
+
+def random_arrow(seed: int, s: int = 3, m: int = 5, nb: int = 4) -> Arrow:
+    """A well-posed arrowhead system: the normal equations of a random block-sparse J."""
+    rng = np.random.default_rng(seed)
+    js, jb = rng.standard_normal((m, 12, s)), rng.standard_normal((m, 12, nb))
+    r = rng.standard_normal((m, 12))
+    return Arrow(
+        a=jnp.asarray(np.einsum("mns,mnt->st", js, js)),
+        b=jnp.asarray(np.einsum("mns,mnb->msb", js, jb)),
+        d=jnp.asarray(np.einsum("mnb,mnc->mbc", jb, jb)),
+        gs=jnp.asarray(np.einsum("mns,mn->s", js, r)),
+        gb=jnp.asarray(np.einsum("mnb,mn->mb", jb, r)),
+    )
+
+
+@pytest.mark.parametrize("masked", [False, True])
+def test_schur_solve_equals_the_dense_solve(masked):
+    """The arrowhead's solve (nuisances eliminated, Schur complement, back-substitution),
+    product, diagonal and masking are the dense matrix's."""
+    arrow = random_arrow(0)
+    p = arrow.grad.size
+    rng = np.random.default_rng(1)
+    mask = jnp.asarray(rng.random(p) > 0.3) if masked else jnp.ones(p, bool)
+    arrow = arrow.masked(mask)
+    dense = DenseNormal(*random_arrow(0).dense()).masked(mask)
+    np.testing.assert_array_equal(arrow.dense()[0], dense.jtj)
+    np.testing.assert_array_equal(arrow.grad, dense.grad)
+    shift, v = jnp.asarray(rng.random(p)), jnp.asarray(rng.standard_normal(p))
+    x = arrow.solve(shift, v)
+    np.testing.assert_allclose(x, dense.solve(shift, v), rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(arrow.matvec(x), dense.matvec(x), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(arrow.diagonal(), np.diag(dense.jtj), rtol=0, atol=0)
+    if masked:  # frozen parameters: identity rows, decoupled from the rest
+        off = ~np.asarray(mask)
+        np.testing.assert_allclose(np.asarray(x)[off], (v / (1.0 + shift))[off], rtol=1e-15)
+
+
 def test_normal_equations_equal_the_dense_jacobians_for_the_bench_model():
     """The fit's whitened residuals mix neighbouring blocks, but never across traces,
     so the colouring stays exact (rel 1e-10: only summation order differs)."""
@@ -77,9 +127,11 @@ def test_normal_equations_equal_the_dense_jacobians_for_the_bench_model():
     assert structure.seeds.shape[0] == model.n_shared + 4  # 10, not 102
     # What the fit uses: the chain rule through the per-trace levels (8 JVPs).
     levels_structure = level_structure(model)
-    r2, jtj2, jtr2, (levels, dlevels, *_) = jax.jit(
+    r2, normal, (levels, dlevels, *_) = jax.jit(
         lambda m, zz: bench_normal_equations(m, levels_structure, zz, 0.5)
     )(model, z)
+    assert isinstance(normal, Arrow)  # blocks, not the dense matrix
+    jtj2, jtr2 = normal.dense()
     np.testing.assert_allclose(r2, fn(z), rtol=1e-12, atol=1e-10)
     assert np.max(np.abs(jtj2 - jac.T @ jac) / scale) < 1e-9
     np.testing.assert_allclose(jtr2, jac.T @ fn(z), rtol=1e-8, atol=1e-9 * np.max(np.abs(jtr)))

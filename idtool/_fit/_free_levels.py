@@ -25,7 +25,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from idtool._fit._program import run_lm
+from idtool._fit._program import run_lm, u_normal_equations
 from idtool._model._benchmodel import BenchModel
 
 __all__ = ["INFORMED_ON", "MIN_AT_LEVEL_S", "FreeLevels", "free_levels", "model_log_levels"]
@@ -95,7 +95,8 @@ def _linearise(model: BenchModel, z: np.ndarray, phi: float):
     residuals, the levels ``(OFF, ON)``, their Jacobian in the physical parameters and
     the normal equations in ``u = (OFF, ON, z[k:])``."""
     out = run_lm(model, np.asarray(z, float), np.ones(z.size, bool), phi, 0)
-    return (np.asarray(out.residuals), *(np.asarray(x) for x in out.aux))
+    lv, dlv, cc, cr = (np.asarray(x) for x in out.aux)
+    return (np.asarray(out.residuals), lv, dlv, *u_normal_equations(model, cc, cr))
 
 
 def free_levels(model: BenchModel, z: np.ndarray, phi: float) -> FreeLevels:

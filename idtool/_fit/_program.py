@@ -18,7 +18,14 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from idtool._data._blocks import FitData, padded_size
-from idtool._fit._lm import ColouredJacobian, LMResult, levenberg_marquardt, normal_equations
+from idtool._fit._arrow import Arrow, DenseNormal
+from idtool._fit._lm import (
+    ColouredJacobian,
+    LMResult,
+    arrow_of_blocks,
+    coloured_blocks,
+    levenberg_marquardt,
+)
 from idtool._model._benchmodel import BenchModel
 
 __all__ = [
@@ -28,6 +35,7 @@ __all__ = [
     "lm_program",
     "prediction_at",
     "run_lm",
+    "u_normal_equations",
     "unwhiten",
 ]
 
@@ -38,26 +46,33 @@ __all__ = [
 _COMPILE = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 1}
 
 
-def level_structure(model: BenchModel) -> ColouredJacobian:
+def level_structure(model: BenchModel, dense: bool = False) -> ColouredJacobian:
     """The sparsity of the Jacobian of ``model``'s residuals in the inputs ``u = (OFF, ON
     levels, z[k:])`` (:attr:`BenchModel.level_group`), coloured: outside a trace only
-    (NumPy on the model's block layout)."""
-    return ColouredJacobian.from_groups(model.level_group, model.data.block_trace)
+    (NumPy on the model's block layout). ``dense``: the fit's normal equations as dense
+    matrices (the reference the tests check the arrowhead against)."""
+    return ColouredJacobian.from_groups(model.level_group, model.data.block_trace, dense)
 
 
 def bench_normal_equations(
     model: BenchModel, structure: ColouredJacobian, z: Float[Array, " p"], phi: float | Array
-) -> tuple[Array, Array, Array, tuple[Array, Array, Array, Array]]:
-    """Whitened residuals ``r``, ``J^T J`` and ``J^T r`` of ``model`` at ``z``; and the
-    levels ``(OFF, ON)`` [N] (2 n_traces) with their Jacobian in the physical parameters,
-    and the normal equations in ``u`` (below), which the levels model reads.
+) -> tuple[Array, Arrow | DenseNormal, tuple[Array, Array, Array, Array]]:
+    """Whitened residuals ``r`` and the normal equations ``J^T J``, ``J^T r`` of
+    ``model`` at ``z`` in arrowhead blocks (:class:`~idtool._fit._arrow.Arrow`: the
+    shared parameters, then each trace's nuisances); and the levels ``(OFF, ON)`` [N]
+    (2 n_traces) with their Jacobian in the physical parameters, and each trace's
+    blocks of the normal equations in ``u`` (below; :func:`u_normal_equations`), which
+    the levels model reads.
 
     The physical parameters reach the traces only through the per-trace OFF and ON
     levels, so the Jacobian is taken in the bench model's inputs ``u = (OFF, ON,
     z[k:])`` with one JVP per colour of ``structure`` (:func:`level_structure`; 8, 9
     with the lag actuator; the contact model stays out of them) and mapped back by the
     chain rule, ``J = J_u T`` with ``T = du/dz``: the levels' small Jacobian in the
-    physical parameters, the identity for the rest.
+    physical parameters, the identity for the rest. Trace by trace: its colours (the
+    shared bench parameters, its OFF and ON levels, its nuisances) map to (the physical
+    parameters, the shared bench ones, its nuisances) by a (colours, s + nb) block of
+    ``T``, so time and memory stay linear in the traces.
     """
     k, m = model.n_physical, model.data.n_traces
     z = jnp.asarray(z)
@@ -72,10 +87,42 @@ def bench_normal_equations(
     # (2 m, k) and (2 m,): the Jacobian and, from the same pass, the levels
     dlv, lv = jax.jacfwd(lambda zp: (levels(zp),) * 2, has_aux=True)(z[:k])
     u = jnp.concatenate([lv, z[k:]])
-    r, jtj_u, jtr_u = normal_equations(resid, u, structure)
-    n_rest = z.size - k
-    t = jnp.block([[dlv, jnp.zeros((2 * m, n_rest))], [jnp.zeros((n_rest, k)), jnp.eye(n_rest)]])
-    return r, t.T @ jtj_u @ t, t.T @ jtr_u, (lv, dlv, jtj_u, jtr_u)
+    r, cc, cr = coloured_blocks(resid, u, structure)  # (m, c, c), (m, c)
+    sb = structure.n_shared  # shared bench parameters: the first colours
+    nb = cc.shape[1] - sb - 2  # each trace's nuisances: the colours after its levels
+    # per trace, T's block: colours (bench, OFF, ON, nuisances) -> (physical, bench,
+    # nuisances)
+    t = jnp.zeros((m, sb + 2 + nb, k + sb + nb))
+    t = t.at[:, :sb, k : k + sb].set(jnp.eye(sb))
+    t = t.at[:, sb, :k].set(dlv[:m]).at[:, sb + 1, :k].set(dlv[m:])
+    t = t.at[:, sb + 2 :, k + sb :].set(jnp.eye(nb))
+    h = jnp.einsum("mcq,mcd,mdr->mqr", t, cc, t)
+    gh = jnp.einsum("mcq,mc->mq", t, cr)
+    arrow = arrow_of_blocks(h, gh, k + sb)
+    normal = arrow.as_dense() if structure.dense else arrow
+    return r, normal, (lv, dlv, cc, cr)
+
+
+def u_normal_equations(
+    model: BenchModel, cc: np.ndarray, cr: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The dense normal equations in ``u = (OFF, ON, z[k:])`` (NumPy) from each trace's
+    blocks that :func:`bench_normal_equations` returns (its colours: the shared bench
+    parameters, the trace's OFF and ON levels, its nuisances): for the levels model,
+    which solves in ``u`` once."""
+    m = model.data.n_traces
+    cc, cr = np.asarray(cc), np.asarray(cr)
+    group = model.level_group
+    sb = int(np.sum(group < 0))
+    # the position in u of each trace's colours (m, c): shared, then its own in order
+    shared = np.flatnonzero(group < 0)
+    own = np.stack([np.flatnonzero(group == i) for i in range(m)])
+    idx = np.concatenate([np.broadcast_to(shared, (m, sb)), own], axis=1)
+    q = group.size
+    jtj, jtr = np.zeros((q, q)), np.zeros(q)
+    np.add.at(jtj, (idx[:, :, None], idx[:, None, :]), cc)
+    np.add.at(jtr, idx, cr)
+    return jtj, jtr
 
 
 @functools.partial(jax.jit, compiler_options=_COMPILE)

@@ -1,0 +1,148 @@
+"""Normal equations of a least-squares problem with per-group parameters: the arrowhead.
+
+A bench fit has ``s`` shared parameters and ``b`` nuisances per trace, and each trace's
+residuals depend on its own nuisances only. ``J^T J`` is then an arrowhead: a dense
+shared block ``A`` (s, s), per trace a coupling ``B_i`` (s, b) and a diagonal block
+``D_i`` (b, b), zero between traces. :class:`Arrow` holds just these blocks (memory
+linear in the traces) and solves a damped system by eliminating the nuisances through
+their Schur complement, ``S = A - sum_i B_i D_i^-1 B_i^T`` (the bundle adjustment
+recipe: Triggs et al., *Bundle adjustment: a modern synthesis*, 2000, §6.1), in time
+linear in the traces instead of cubic. :class:`DenseNormal` is the same interface on the
+dense matrices, the reference the tests check the arrowhead against.
+
+Layout of the parameter vector ``z``: the ``s`` shared parameters first, then the
+nuisances group by group (the j-th nuisance of trace i at ``s + j m + i``), as
+:class:`idtool._model._benchmodel.BenchModel` orders them.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float
+
+__all__ = ["Arrow", "DenseNormal", "block_index"]
+
+
+def block_index(n_shared: int, n_groups: int, per_group: int) -> np.ndarray:
+    """(groups, per_group) position in ``z`` of each group's nuisances (module
+    docstring's layout)."""
+    return n_shared + np.arange(per_group)[None, :] * n_groups + np.arange(n_groups)[:, None]
+
+
+class Arrow(eqx.Module):
+    """``J^T J`` and ``J^T r`` in arrowhead blocks (module docstring).
+
+    Attributes:
+        a: (s, s) shared block.
+        b: (m, s, nb) coupling of the shared parameters with each group's nuisances.
+        d: (m, nb, nb) each group's own block.
+        gs: (s,) shared part of ``J^T r``.
+        gb: (m, nb) each group's part of ``J^T r``.
+    """
+
+    a: Float[Array, "s s"]
+    b: Float[Array, "m s nb"]
+    d: Float[Array, "m nb nb"]
+    gs: Float[Array, " s"]
+    gb: Float[Array, "m nb"]
+
+    def split(self, v: Float[Array, " p"]) -> tuple[Array, Array]:
+        """A vector in ``z``'s layout as (shared (s,), per group (m, nb))."""
+        s = self.a.shape[0]
+        m, nb = self.gb.shape
+        return v[:s], v[s:].reshape(nb, m).T
+
+    @staticmethod
+    def join(vs: Array, vb: Array) -> Float[Array, " p"]:
+        """Inverse of :meth:`split`."""
+        return jnp.concatenate([vs, vb.T.ravel()])
+
+    @property
+    def grad(self) -> Float[Array, " p"]:
+        """``J^T r`` in ``z``'s layout."""
+        return self.join(self.gs, self.gb)
+
+    def diagonal(self) -> Float[Array, " p"]:
+        """The diagonal of ``J^T J`` in ``z``'s layout."""
+        return self.join(jnp.diag(self.a), jnp.diagonal(self.d, axis1=1, axis2=2))
+
+    def matvec(self, h: Float[Array, " p"]) -> Float[Array, " p"]:
+        """``J^T J h``."""
+        hs, hb = self.split(h)
+        ys = self.a @ hs + jnp.einsum("msb,mb->s", self.b, hb)
+        yb = jnp.einsum("msb,s->mb", self.b, hs) + jnp.einsum("mbc,mc->mb", self.d, hb)
+        return self.join(ys, yb)
+
+    def masked(self, mask: Bool[Array, " p"]) -> Arrow:
+        """Parameters outside ``mask`` frozen: identity rows and columns, zero gradient."""
+        ms, mb = self.split(mask)
+        nb = self.d.shape[-1]
+        a = jnp.where(ms[:, None] & ms[None, :], self.a, jnp.diag(jnp.where(ms, 0.0, 1.0)))
+        b = jnp.where(ms[None, :, None] & mb[:, None, :], self.b, 0.0)
+        both = mb[:, :, None] & mb[:, None, :]
+        eye = jnp.where(mb[:, :, None], 0.0, jnp.eye(nb))
+        d = jnp.where(both, self.d, eye)
+        return Arrow(a, b, d, jnp.where(ms, self.gs, 0.0), jnp.where(mb, self.gb, 0.0))
+
+    def solve(self, shift: Float[Array, " p"], v: Float[Array, " p"]) -> Float[Array, " p"]:
+        """``x`` with ``(J^T J + diag(shift)) x = v``: each group's nuisances eliminated
+        (batched (nb, nb) solves), the (s, s) Schur complement solved densely, the
+        nuisances back-substituted. Exact, like a dense solve, in O(m)."""
+        s = self.a.shape[0]
+        ss, sb = self.split(shift)
+        vs, vb = self.split(v)
+        d = self.d + sb[:, :, None] * jnp.eye(self.d.shape[-1])
+        # D_i^-1 [B_i^T, v_i] for every group at once: (m, nb, s + 1)
+        x = jnp.linalg.solve(d, jnp.concatenate([self.b.transpose(0, 2, 1), vb[:, :, None]], 2))
+        schur = self.a + jnp.diag(ss) - jnp.einsum("msb,mbt->st", self.b, x[..., :s])
+        xs = jnp.linalg.solve(schur, vs - jnp.einsum("msb,mb->s", self.b, x[..., s]))
+        xb = x[..., s] - jnp.einsum("mbs,s->mb", x[..., :s], xs)
+        return self.join(xs, xb)
+
+    def dense(self) -> tuple[Float[Array, "p p"], Float[Array, " p"]]:
+        """The dense ``J^T J`` (p, p) and ``J^T r`` (p,): for the reference and for
+        callers that need the whole matrix (O(p^2) memory)."""
+        s = self.a.shape[0]
+        m, nb = self.gb.shape
+        idx = block_index(s, m, nb)  # (m, nb)
+        jtj = jnp.zeros((s + m * nb,) * 2).at[:s, :s].set(self.a)
+        jtj = jtj.at[np.arange(s)[None, :, None], idx[:, None, :]].set(self.b)
+        jtj = jtj.at[idx[:, :, None], np.arange(s)[None, None, :]].set(self.b.transpose(0, 2, 1))
+        jtj = jtj.at[idx[:, :, None], idx[:, None, :]].set(self.d)
+        return jtj, self.grad
+
+    def as_dense(self) -> DenseNormal:
+        """The same equations as a :class:`DenseNormal` (the reference path)."""
+        return DenseNormal(*self.dense())
+
+
+class DenseNormal(eqx.Module):
+    """Dense ``J^T J`` (p, p) and ``J^T r`` (p,) with :class:`Arrow`'s interface: the
+    reference (an LU solve of the whole matrix, O(p^3))."""
+
+    jtj: Float[Array, "p p"]
+    jtr: Float[Array, " p"]
+
+    @property
+    def grad(self) -> Float[Array, " p"]:
+        return self.jtr
+
+    def diagonal(self) -> Float[Array, " p"]:
+        return jnp.diag(self.jtj)
+
+    def matvec(self, h: Float[Array, " p"]) -> Float[Array, " p"]:
+        return self.jtj @ h
+
+    def masked(self, mask: Bool[Array, " p"]) -> DenseNormal:
+        both = mask[:, None] & mask[None, :]
+        eye = jnp.eye(mask.size)
+        jtj = jnp.where(both, self.jtj, jnp.where(mask[:, None] | mask[None, :], 0.0, eye))
+        return DenseNormal(jtj, jnp.where(mask, self.jtr, 0.0))
+
+    def solve(self, shift: Float[Array, " p"], v: Float[Array, " p"]) -> Float[Array, " p"]:
+        return jnp.linalg.solve(self.jtj + jnp.diag(shift), v)
+
+    def dense(self) -> tuple[Float[Array, "p p"], Float[Array, " p"]]:
+        return self.jtj, self.jtr

@@ -1,0 +1,67 @@
+"""The fit on the arrowhead normal equations (issue 28): the nuisances eliminated per
+trace by their Schur complement give the same optimum, covariance and checked intervals
+as the dense normal equations (the reference, kept here), on the example."""
+
+import functools
+
+import numpy as np
+import pytest
+
+import idtool
+from idtool._data._blocks import prepare_fit_data
+from idtool._fit import _program
+from idtool._fit._arrow import Arrow, DenseNormal
+from idtool._fit._fit import fit_model
+from idtool._fit._intervals import check_intervals
+from idtool._model._benchmodel import bench_model
+
+# Both paths solve the same equations exactly; they differ in rounding only, and the
+# converged points agree far inside the optimiser's own tolerance.
+REL = 1e-8
+
+
+@pytest.fixture(scope="module")
+def fits():
+    data = prepare_fit_data(idtool.load_dataset(idtool.example_dataset_path()))
+    arrow = check_intervals(fit_model(data))
+    with pytest.MonkeyPatch.context() as mp:
+        dense = functools.partial(_program.level_structure, dense=True)
+        mp.setattr(_program, "level_structure", dense)
+        reference = check_intervals(fit_model(data))
+    return arrow, reference
+
+
+def test_the_fit_runs_on_arrowhead_blocks_and_the_reference_on_dense_matrices():
+    data = prepare_fit_data(idtool.load_dataset(idtool.example_dataset_path()))
+    model = bench_model(data)
+    z = model.z0()
+    out = _program.run_lm(model, z, np.ones(z.size, bool), 0.0, 0)
+    assert isinstance(out.normal, Arrow)
+    m, k = data.n_traces, model.n_shared
+    assert out.normal.d.shape[0] == m and out.normal.a.shape == (k, k)
+    with pytest.MonkeyPatch.context() as mp:
+        dense = functools.partial(_program.level_structure, dense=True)
+        mp.setattr(_program, "level_structure", dense)
+        ref = _program.run_lm(model, z, np.ones(z.size, bool), 0.0, 0)
+    assert isinstance(ref.normal, DenseNormal)
+    scale = np.sqrt(np.outer(np.diag(ref.jtj), np.diag(ref.jtj)))
+    assert np.max(np.abs(np.asarray(out.jtj) - ref.jtj) / scale) < 1e-12
+
+
+def test_estimates_and_intervals_equal_the_dense_reference(fits):
+    arrow, reference = fits
+    assert arrow.model.names == reference.model.names
+    for name, est in reference.estimates.items():
+        got = arrow.estimates[name]
+        # relative to the value, or to its standard error for values near zero
+        tol = REL * max(abs(est.estimate), est.std_error)
+        assert got.estimate == pytest.approx(est.estimate, rel=0, abs=tol), name
+        assert got.std_error == pytest.approx(est.std_error, rel=REL), name
+        np.testing.assert_allclose(got.ci95, est.ci95, rtol=REL, atol=tol, err_msg=name)
+        assert got.one_sided == est.one_sided
+    assert arrow.phi == pytest.approx(reference.phi, rel=REL)
+    assert arrow.rss == pytest.approx(reference.rss, rel=REL)
+    np.testing.assert_allclose(
+        arrow.cov_z, reference.cov_z, rtol=0, atol=REL * np.max(np.abs(reference.cov_z))
+    )
+    assert [str(w) for w in arrow.warnings] == [str(w) for w in reference.warnings]
