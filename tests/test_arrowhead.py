@@ -4,13 +4,14 @@ as the dense normal equations (the reference, kept here), on the example."""
 
 import functools
 
+import equinox as eqx
 import numpy as np
 import pytest
 
 import idtool
 from idtool._data._blocks import prepare_fit_data
 from idtool._fit import _program
-from idtool._fit._arrow import Arrow, DenseNormal
+from idtool._fit._arrow import Arrow, DenseNormal, block_index, inverse_and_weakest
 from idtool._fit._fit import fit_model
 from idtool._fit._intervals import check_intervals
 from idtool._model._benchmodel import bench_model
@@ -65,3 +66,36 @@ def test_estimates_and_intervals_equal_the_dense_reference(fits):
         arrow.cov_z, reference.cov_z, rtol=0, atol=REL * np.max(np.abs(reference.cov_z))
     )
     assert [str(w) for w in arrow.warnings] == [str(w) for w in reference.warnings]
+
+
+def zero_column_arrow(seed: int = 0, s: int = 3, m: int = 5, nb: int = 4) -> Arrow:
+    """Normal equations of a random block-sparse J whose trace 2 slot 1 nuisance moves
+    no residual (a zero column, as a parameter the data do not move)."""
+    rng = np.random.default_rng(seed)
+    js, jb = rng.standard_normal((m, 12, s)), rng.standard_normal((m, 12, nb))
+    jb[2, :, 1] = 0.0
+    r = rng.standard_normal((m, 12))
+    return Arrow(
+        a=np.einsum("mns,mnt->st", js, js),
+        b=np.einsum("mns,mnb->msb", js, jb),
+        d=np.einsum("mnb,mnc->mbc", jb, jb),
+        gs=np.einsum("mns,mn->s", js, r),
+        gb=np.einsum("mnb,mn->mb", jb, r),
+    )
+
+
+@pytest.mark.parametrize("singular", [False, True])
+def test_the_covariance_from_the_schur_complement_is_the_dense_pseudo_inverse(singular):
+    arrow = zero_column_arrow()
+    if not singular:  # the zero column filled in
+        arrow = eqx.tree_at(lambda a: a.d, arrow, arrow.d + 0.5 * np.eye(arrow.d.shape[-1]))
+    inverse, ratio, vector = inverse_and_weakest(arrow)
+    ref_inverse, ref_ratio, ref_vector = inverse_and_weakest(arrow.as_dense())
+    np.testing.assert_allclose(inverse, ref_inverse, rtol=0, atol=1e-12 * np.abs(ref_inverse).max())
+    if singular:  # the parameter the data do not move: no variance, named as singular
+        j = block_index(3, 5, 4)[2, 1]
+        assert abs(inverse[j, j]) < 1e-20 * np.abs(ref_inverse).max()
+        assert ratio < 1e-12 and ref_ratio < 1e-12
+        assert np.argmax(np.abs(vector)) == np.argmax(np.abs(ref_vector)) == j
+    else:
+        assert ratio > 1e-6 and ref_ratio > 1e-6

@@ -30,6 +30,7 @@ import numpy as np
 
 from idtool._data._blocks import FitData
 from idtool._diagnostic import Diagnostic
+from idtool._fit._arrow import inverse_and_weakest
 from idtool._fit._lm import LMResult
 from idtool._fit._program import run_lm, unwhiten
 from idtool._fit._result import Estimate, FitResult, estimate_of
@@ -274,19 +275,22 @@ def _settle_phi(model: BenchModel, best: LMResult, phi: float, run) -> tuple[LMR
 
 def _values_and_jacobian(
     model: BenchModel, z: np.ndarray, levels: np.ndarray, dlevels: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Every parameter's value in its unit, then each trace's friction ratio ON/OFF;
-    and their Jacobian in ``z``, from the levels and their derivatives that the last
-    linearisation of the fit computed (so no further program to compile)."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every parameter's value in its unit, then each trace's friction ratio ON/OFF; and
+    their Jacobian in ``z``, in its two non-zero parts: the values' slopes (p,) (each
+    value moves with its own ``z`` only) and the ratios' (traces, k) in the physical
+    parameters; from the levels and their derivatives that the last linearisation of
+    the fit computed (so no further program to compile). The dense (p + traces, p)
+    Jacobian would make the delta method O(p^3)."""
     specs = model.params
-    p, m, k = len(specs), model.data.n_traces, model.n_physical
-    vals, jac = np.empty(p + m), np.zeros((p + m, p))
+    p, m = len(specs), model.data.n_traces
+    vals, slopes = np.empty(p + m), np.empty(p)
     for i, spec in enumerate(specs):
-        vals[i], jac[i, i] = float(spec.value(z[i])), spec.slope(z[i])
+        vals[i], slopes[i] = float(spec.value(z[i])), spec.slope(z[i])
     off, on = levels[:m], levels[m:]
     vals[p:] = on / off
-    jac[p:, :k] = (dlevels[m:] * off[:, None] - on[:, None] * dlevels[:m]) / off[:, None] ** 2
-    return vals, jac
+    dratio = (dlevels[m:] * off[:, None] - on[:, None] * dlevels[:m]) / off[:, None] ** 2
+    return vals, slopes, dratio
 
 
 def _summarise(
@@ -298,23 +302,23 @@ def _summarise(
     n, p = w.size, z.size
     rss = float(w @ w)
     sigma2 = rss / (n - p)
-    jtj, jtr = np.asarray(best.jtj), np.asarray(best.jtr)
-    decrement = float(jtr @ np.linalg.pinv(jtj, rcond=1e-13, hermitian=True) @ jtr)
+    # (J^T J)^+ from the arrowhead blocks (O(p^2), not O(p^3)). A parameter the data do
+    # not move at all (saturated at a bound) has a zero column and zero variance; the
+    # bound warning below names it.
+    inverse, weakest, weakest_direction = inverse_and_weakest(best.normal)
+    jtr = np.asarray(best.jtr)
+    decrement = float(jtr @ inverse @ jtr)
     converged = bool(best.converged) or decrement < _DECREMENT_AT_OPTIMUM * rss / n
-    # A parameter the data do not move at all (saturated at a bound) has a zero column;
-    # the bound warning below names it.
-    scale = np.sqrt(np.diag(jtj))
-    scale = np.where(scale > 0.0, scale, 1.0)
-    scaled = jtj / np.outer(scale, scale)
-    evals, evecs = np.linalg.eigh(scaled)
-    cov = sigma2 * np.linalg.pinv(scaled, rcond=1e-13, hermitian=True) / np.outer(scale, scale)
+    cov = sigma2 * inverse
     se_z = np.sqrt(np.maximum(np.diag(cov), 0.0))
     se_safe = np.where(se_z > 0.0, se_z, 1.0)
     corr = cov / np.outer(se_safe, se_safe)
 
     # delta method for the physical values (and the per-trace friction ratios)
-    vals, dvals = _values_and_jacobian(model, z, *(np.asarray(x) for x in best.aux[:2]))
-    se_vals = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", dvals, cov, dvals), 0.0))
+    vals, slopes, dratio = _values_and_jacobian(model, z, *(np.asarray(x) for x in best.aux[:2]))
+    k = model.n_physical
+    var_ratio = np.einsum("ij,jk,ik->i", dratio, cov[:k, :k], dratio)
+    se_vals = np.sqrt(np.maximum(np.concatenate([slopes**2 * np.diag(cov), var_ratio]), 0.0))
 
     warnings: list[str] = []
     estimates: dict[str, Estimate] = {}
@@ -350,7 +354,6 @@ def _summarise(
         estimates[name] = Estimate(
             name, unit, value, 0.0, (value, value), fixed=True, fixed_label=labels[name]
         )
-    k = model.n_physical
     for a in range(k):
         for b in range(a + 1, k):
             if abs(corr[a, b]) > 0.95:
@@ -363,15 +366,15 @@ def _summarise(
                         correlation=float(corr[a, b]),
                     )
                 )
-    if evals[0] < 1e-12 * evals[-1]:
-        v = evecs[:, 0]
+    if weakest < 1e-12:
+        v = weakest_direction
         top = np.argsort(-np.abs(v))[:3]
         combo = ", ".join(f"{specs[j].name} ({v[j]:+.2f})" for j in top)
         warnings.append(
             Diagnostic(
                 "singular",
                 f"near-singular direction in parameter space: {combo}",
-                eigenvalue_ratio=float(evals[0] / evals[-1]),
+                eigenvalue_ratio=weakest,
             )
         )
     loads = np.unique(data.normal_load_n)

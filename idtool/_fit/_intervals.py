@@ -26,6 +26,7 @@ __all__ = [
     "check_intervals",
     "profile_interval",
     "profile_parameter",
+    "profile_start",
     "refit_with_fixed",
 ]
 
@@ -40,15 +41,33 @@ def refit_with_fixed(
 ) -> tuple[float, np.ndarray]:
     """Refit every parameter but ``i`` (held at ``zi``, internal scale), same AR(1) phi.
 
-    Returns the rise of ``-2 log L`` over the optimum, ``(RSS - RSS_min) / sigma^2``,
-    and the refitted vector (a warm start for the next point of a profile).
+    Starts from ``z_start`` (default: the optimum) moved along the Gauss-Newton profile
+    path (:func:`profile_start`). Returns the rise of ``-2 log L`` over the optimum,
+    ``(RSS - RSS_min) / sigma^2``, and the refitted vector (a warm start for the next
+    point of a profile).
     """
-    z = np.array(result.z if z_start is None else z_start, float)
+    z = profile_start(result, i, zi, z_start)
     mask = np.ones(z.size, bool)
-    mask[i], z[i] = False, zi
+    mask[i] = False
     out = run_lm(result.model, z, mask, result.phi, 100)
     sigma2 = result.rss / (result.n_data - result.z.size)
     return (2.0 * float(out.loss) - result.rss) / sigma2, np.asarray(out.z)
+
+
+def profile_start(result: FitResult, i: int, zi: float, z_from=None) -> np.ndarray:
+    """Where a refit with parameter ``i`` held at ``zi`` starts: ``z_from`` (default: the
+    optimum) with ``z_i`` set to ``zi`` and the others moved by what the quadratic loss
+    predicts, ``cov[:, i] / cov[i, i]`` per unit of ``z_i`` (the conditional mean of the
+    Gaussian approximation). Along a long correlated valley (Kt with the load-power
+    coupling's exponent, +0.98) the others then start near their refitted values instead
+    of across the valley: 70-90 LM steps per refit on 48 traces before, most of them
+    crawling back along it."""
+    z = np.array(result.z if z_from is None else z_from, float)
+    cov = np.asarray(result.cov_z)
+    if cov[i, i] > 0.0:
+        z += cov[:, i] / cov[i, i] * (zi - z[i])
+    z[i] = zi
+    return z
 
 
 def _profile_end(

@@ -1,0 +1,135 @@
+"""Benchmark: how the fit scales with the number of traces of one design (issue 28).
+
+The bench: the departure preset ``scatter`` (pull-to-pull scatter, power-limited
+coupling; :func:`idtool._simulate._departures.departure_params`, seed 0) on 3 loads x 2
+amplitudes x 2 ON durations (1 s, 2 s), repeated ``n / 12`` times: 12, 24, 48, 96 and 384
+traces of the same operating points (:func:`repeated_bench`).
+
+For each trace count, in a fresh interpreter: the fit's one compiled Levenberg-Marquardt
+program is compiled first (a linearisation at the start, what a warm compilation cache
+gives ``idtool fit``), then ``fit_model`` (8 starts, polish, AR(1) rounds) and
+``check_intervals`` (refits with each physical parameter held at its interval's ends,
+profiles where too flat) are timed together; peak memory is the process's maximum
+resident set. The same on the dense normal equations (the reference path,
+``level_structure(dense=True)``: what the fit did before the arrowhead) up to
+``--dense-max`` traces (default 48: it takes 4 minutes at 96). Printed side by side,
+with the exponent of a power law fitted to time against traces (least squares in logs).
+
+Run: ``.venv/bin/python benchmarks/bench_scaling.py [--counts 12 24 48 96 384]
+[--dense-max 48]`` (about 10 minutes on a quiet 2-CPU machine).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+BASE = 12  # traces of one repeat: 3 loads x 2 amplitudes x 2 ON durations
+SEED = 0
+
+CHILD = """
+import functools, json, resource, sys, time
+import numpy as np
+sys.path.insert(0, {here!r})
+from bench_scaling import repeated_bench
+from idtool._data._blocks import prepare_fit_data
+from idtool._fit import _program
+from idtool._fit._fit import fit_model
+from idtool._fit._intervals import check_intervals
+from idtool._model._benchmodel import bench_model
+
+n, dense = int(sys.argv[1]), sys.argv[2] == "dense"
+if dense:
+    _program.level_structure = functools.partial(_program.level_structure, dense=True)
+data = prepare_fit_data(repeated_bench(n, {seed}))
+model = bench_model(data)
+z = model.z0()
+_program.run_lm(model, z, np.ones(z.size, bool), 0.0, 0)  # compile the program
+t = time.perf_counter()
+result = check_intervals(fit_model(data))
+wall = time.perf_counter() - t
+json.dump({{
+    "traces": data.n_traces, "seconds": wall,
+    "peak_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6,
+    "steps": result.lm_steps,
+    "estimates": {{k: result.estimates[k].estimate for k in model.physical_names}},
+}}, sys.stdout)
+"""
+
+
+def repeated_bench(n_traces: int, seed: int = SEED):
+    """The ``scatter`` departure bench (seed ``seed``) on the 12 operating points of
+    module docstring, repeated to ``n_traces`` traces (a multiple of 12)."""
+    from idtool._simulate._departures import departure_params
+    from idtool._simulate._simulate import simulate_bench
+
+    if n_traces % BASE:
+        raise ValueError(f"{n_traces} traces: give a multiple of {BASE}")
+    params = departure_params("scatter", seed)
+    matrix = dataclasses.replace(
+        params.experiments, on_durations_s=(1.0, 2.0), repeats=n_traces // BASE
+    )
+    dataset, _ = simulate_bench(dataclasses.replace(params, experiments=matrix), seed)
+    return dataset
+
+
+def run(n: int, path: str) -> dict | None:
+    code = CHILD.format(here=str(Path(__file__).parent), seed=SEED)
+    out = subprocess.run(
+        [sys.executable, "-c", code, str(n), path], capture_output=True, text=True, check=False
+    )
+    if out.returncode:
+        print(out.stderr[-2000:], file=sys.stderr)
+        return None
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def exponent(rows: list[dict]) -> float:
+    """Slope of log(time) against log(traces), least squares."""
+    x = np.log([r["traces"] for r in rows])
+    y = np.log([r["seconds"] for r in rows])
+    return float(np.polyfit(x, y, 1)[0])
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--counts", type=int, nargs="+", default=[12, 24, 48, 96, 384])
+    ap.add_argument("--dense-max", type=int, default=48)
+    args = ap.parse_args()
+    rows: dict[str, list[dict]] = {"arrowhead": [], "dense": []}
+    print(f"{'traces':>6}  {'arrowhead s':>11} {'GB':>5} {'steps':>5}  {'dense s':>8} {'GB':>5}")
+    for n in args.counts:
+        a = run(n, "arrowhead")
+        d = run(n, "dense") if n <= args.dense_max else None
+        for key, r in (("arrowhead", a), ("dense", d)):
+            if r is not None:
+                rows[key].append(r)
+        cells = [f"{n:>6}"]
+        cells.append(
+            f"{a['seconds']:>11.1f} {a['peak_gb']:>5.2f} {a['steps']:>5}" if a else " " * 23
+        )
+        cells.append(f"{d['seconds']:>8.1f} {d['peak_gb']:>5.2f}" if d else f"{'-':>8}")
+        if a and d:  # same optimum on both paths
+            worst = max(
+                abs(a["estimates"][k] - d["estimates"][k]) / abs(d["estimates"][k])
+                for k in d["estimates"]
+            )
+            cells.append(f"  estimates agree to {worst:.1e}")
+        print("  ".join(cells), flush=True)
+    for key, r in rows.items():
+        if len(r) >= 2:
+            span = f"{r[0]['traces']}-{r[-1]['traces']}"
+            print(f"{key}: time ~ traces^{exponent(r):.2f} ({span} traces)")
+    ok = all(math.isfinite(r["seconds"]) for r in rows["arrowhead"])
+    return 0 if ok and len(rows["arrowhead"]) == len(args.counts) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
