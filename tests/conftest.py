@@ -153,6 +153,7 @@ FILE_SECONDS: dict[str, float] = {
     "tests/test_fit.py": 120,
     "tests/test_validate_fit.py": 100,
     "tests/test_lm.py": 90,
+    "tests/test_arrowhead.py": 80,
     "tests/test_offset.py": 75,
     "tests/test_cli_model.py": 65,
     "tests/test_coupling_load_power.py": 55,

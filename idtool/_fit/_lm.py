@@ -62,13 +62,14 @@ class ColouredJacobian(eqx.Module):
     Attributes:
         seeds: (c, p) 0/1 tangents, one per colour.
         colour: (p,) colour of each parameter.
-        active: (m, p) 1 where parameter p can move the residuals of row group m.
+        param_group: (p,) the row group each parameter moves alone, -1 if every one
+            (shared); no (groups, p) array: memory stays linear in the groups.
         row_group: (n,) group of each residual row.
     """
 
     seeds: Float[np.ndarray, "c p"]
     colour: Int[np.ndarray, " p"]
-    active: Float[np.ndarray, "m p"]
+    param_group: Int[np.ndarray, " p"]
     row_group: Int[np.ndarray, " n"]
     n_groups: int = eqx.field(static=True)
     n_shared: int = eqx.field(static=True, default=0)  # the first colours, one each
@@ -99,16 +100,13 @@ class ColouredJacobian(eqx.Module):
             colour[j] = int(shared.sum()) + rank[g]
             rank[g] += 1
         n_colours = int(colour.max()) + 1
-        active = np.where(
-            shared[None, :], 1.0, param_group[None, :] == np.arange(n_groups)[:, None]
-        )
         seeds = (colour[None, :] == np.arange(n_colours)[:, None]).astype(float)
         # NumPy, not JAX, arrays: the structure may first be built inside a trace (a
         # cached property), and it must not capture that trace's values.
         return cls(
             seeds=seeds,
             colour=colour,
-            active=active.astype(float),
+            param_group=param_group,
             row_group=row_group,
             n_groups=n_groups,
             n_shared=int(shared.sum()),
@@ -128,7 +126,8 @@ def normal_equations(
     cc = jax.ops.segment_sum(c[:, :, None] * c[:, None, :], g, structure.n_groups)
     cr = jax.ops.segment_sum(c * r[:, None], g, structure.n_groups)
     col = structure.colour
-    act = structure.active
+    pg = jnp.asarray(structure.param_group)
+    act = ((pg[None, :] < 0) | (pg[None, :] == jnp.arange(structure.n_groups)[:, None])) * 1.0
     jtj = jnp.einsum("mp,mq,mpq->pq", act, act, cc[:, col][:, :, col])
     jtr = jnp.einsum("mp,mp->p", act, cr[:, col])
     return r, jtj, jtr
