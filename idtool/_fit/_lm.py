@@ -331,8 +331,9 @@ class ColouredLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     and one JVP per colour, never a dense Jacobian. optimistix drives the loop
     (:func:`optimistix.least_squares`); each iteration is :func:`_update`.
 
-    ``options``: ``mask`` (bool, per parameter: which ones move) and ``max_steps`` (a
-    traced step budget: one compiled program serves every budget). Attributes:
+    ``options``: ``mask`` (bool, per parameter: which ones move), ``max_steps`` (a
+    traced step budget: one compiled program serves every budget) and optionally
+    ``tol`` (a traced ``rtol``, which it then replaces). Attributes:
     ``rtol``, the convergence threshold on the Gauss-Newton decrement ``g^T (J^T J)^-1
     g`` relative to the residual variance ``|r|^2 / n`` (the optimum is then within
     ``sqrt(rtol)`` standard errors in every direction); ``max_step``, the longest step
@@ -350,7 +351,8 @@ class ColouredLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
 
     def step(self, fn, y, args, options, state, tags):
         lin = _linearise(fn, state["trial"], args, options["mask"])
-        state = _update(state, lin, options["mask"], self.rtol, self.max_step)
+        tol = options.get("tol", self.rtol)
+        state = _update(state, lin, options["mask"], tol, self.max_step)
         return state["z"], state, (state["normal"], state["aux"])
 
     def terminate(self, fn, y, args, options, state, tags):
@@ -392,7 +394,7 @@ def levenberg_marquardt(
     args: Any,
     mask: Bool[Array, " p"],
     max_steps: int | Array = 100,
-    tol: float = 1e-8,
+    tol: float | Array = 1e-8,
     max_step: float = 5.0,
 ) -> LMResult:
     """Minimise ``0.5 |r(z)|^2`` over the parameters in ``mask``, with optimistix
@@ -418,10 +420,14 @@ def levenberg_marquardt(
 
     solution: optx.Solution = optx.least_squares(
         _solver_fn(equations),
-        ColouredLevenbergMarquardt(rtol=tol, max_step=max_step),
+        ColouredLevenbergMarquardt(max_step=max_step),
         jnp.asarray(z0, float),
         args,
-        options={"mask": jnp.asarray(mask), "max_steps": jnp.asarray(max_steps)},
+        options={
+            "mask": jnp.asarray(mask),
+            "max_steps": jnp.asarray(max_steps),
+            "tol": jnp.asarray(tol, float),  # traced: one program for every tolerance
+        },
         has_aux=True,
         max_steps=None,  # the budget is the traced option above
         throw=False,

@@ -29,6 +29,7 @@ from idtool._fit._lm import (
 from idtool._model._benchmodel import BenchModel
 
 __all__ = [
+    "LM_TOL",
     "bench_normal_equations",
     "level_structure",
     "lm_arguments",
@@ -44,6 +45,9 @@ __all__ = [
 # LLVM's optimisation level 1 instead of 2 compiles it in 1.19 s instead of 1.35 s and
 # runs 20 steps in 83 ms as before (level 0: 0.58 s, but 235 ms).
 _COMPILE = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 1}
+# Levenberg-Marquardt's convergence threshold on the Gauss-Newton decrement, in residual
+# variances: the optimum within sqrt(1e-8) = 1e-4 standard errors in every direction.
+LM_TOL = 1e-8
 
 
 def level_structure(model: BenchModel, dense: bool = False) -> ColouredJacobian:
@@ -127,24 +131,26 @@ def u_normal_equations(
 
 @functools.partial(jax.jit, compiler_options=_COMPILE)
 def lm_program(
-    model: BenchModel, structure: ColouredJacobian, z0, mask, phi, max_steps
+    model: BenchModel, structure: ColouredJacobian, z0, mask, phi, max_steps, tol
 ) -> LMResult:
     """The compiled program of :func:`run_lm` (its model already padded, ``structure``
     its :func:`level_structure`)."""
     equations = jax.tree_util.Partial(bench_normal_equations, model, structure)
-    return levenberg_marquardt(equations, z0, phi, mask, max_steps)
+    return levenberg_marquardt(equations, z0, phi, mask, max_steps, tol)
 
 
-def run_lm(model: BenchModel, z0, mask, phi, max_steps) -> LMResult:
+def run_lm(model: BenchModel, z0, mask, phi, max_steps, tol: float = LM_TOL) -> LMResult:
     """Levenberg-Marquardt on the AR(1)-whitened residuals of ``model``
     (:func:`bench_normal_equations`) over the parameters in ``mask``, returning
-    them with the per-trace levels. The model is an argument, not a constant, and its
-    blocks are padded to :func:`~idtool._data._blocks.padded_size` (residuals 0 there,
-    cut off again here): one compiled program serves every start, polish, AR(1) round,
-    profile point and every dataset of about the same length and the same laws."""
+    them with the per-trace levels; ``tol``: the convergence threshold on the
+    Gauss-Newton decrement, in residual variances (:func:`levenberg_marquardt`). The
+    model is an argument, not a constant, and its blocks are padded to
+    :func:`~idtool._data._blocks.padded_size` (residuals 0 there, cut off again here):
+    one compiled program serves every start, polish, AR(1) round, profile point,
+    tolerance and every dataset of about the same length and the same laws."""
     n = model.data.force_n.shape[0]
     padded = _padded(model)
-    out = lm_program(padded, level_structure(padded), z0, mask, phi, max_steps)
+    out = lm_program(padded, level_structure(padded), z0, mask, phi, max_steps, float(tol))
     # cut in NumPy: a JAX slice would be one more program to compile for every n
     return eqx.tree_at(lambda o: o.residuals, out, np.asarray(out.residuals)[:n])
 
@@ -155,7 +161,7 @@ def lm_arguments(model: BenchModel) -> tuple:
     :class:`~idtool._fit._prefetch.CompileAhead`)."""
     z = np.asarray(model.z0(), float)
     padded = _padded(model)
-    return (padded, level_structure(padded), z, np.ones(z.size, bool), 0.0, 0)
+    return (padded, level_structure(padded), z, np.ones(z.size, bool), 0.0, 0, LM_TOL)
 
 
 def _padded(model: BenchModel) -> BenchModel:
