@@ -16,7 +16,15 @@ resident set. The same on the dense normal equations (the reference path,
 with the exponent of a power law fitted to time against traces (least squares in logs).
 
 Run: ``.venv/bin/python benchmarks/bench_scaling.py [--counts 12 24 48 96 384]
-[--dense-max 48]`` (about 10 minutes on a quiet 2-CPU machine).
+[--dense-max 48]`` (15-20 minutes; the 384 traces alone 8 on a loaded 2-CPU machine).
+
+Measured 2026-11-25, load average 6-10 on 2 CPUs (other jobs; the timings are noisy):
+fit + checks 0.9, 12.4, 19.8, 148, 481 s and 0.49-1.07 GB at 12, 24, 48, 96, 384
+traces; dense 1.5, 12.1 s at 12, 24 and 246 s at 48. Per LM step (min of 3, 20-step
+runs): 4.2, 7.5, 24.5, 72, 217 ms; dense 4.4, 7.7, 214, 397 ms. What stays above linear
+is the number of refits: from 96 traces on, the fit and the refits stop short of their
+tolerance (the damping gives up after 60-100 steps) and some Wald ends rise by less
+than 1, so profiles are walked.
 """
 
 from __future__ import annotations
