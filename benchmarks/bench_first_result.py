@@ -12,7 +12,8 @@ the persistent compilation cache of the command line, in phases:
   it reported separately from ``jax.monitoring``, summed over threads: the fit compiles
   the next candidate models' programs in a thread of its own while it computes
   (``idtool._fit._prefetch``), so these can add up to more than the phase's time;
-* ``report``: the text report; ``save``: fit.json, fit_state.npz and the two figures.
+* ``report``: the text report (made inside ``idtool.fit`` with the fit's artefact, so this
+  phase reads it); ``save``: fit.json, fit_state.npz and the two figures.
 
 First with an empty cache folder (cold: what a new user waits), then three times with
 it warm (a repeated fit of a dataset of the same shape). Also ``import idtool`` alone

@@ -4,9 +4,11 @@
 the :class:`Fit` it returns carries the estimates and their intervals, the text
 report, and (after :meth:`Fit.sample`) the posterior. Predictions come from the
 posterior when there is one, else from Gaussian draws on the fit's covariance, and say
-which. ``Fit.save`` writes the fit folder the command line writes, and
-``idtool.load_fit`` reads it back. Everything a notebook needs is here, with no private
-module in sight.
+which (one path: :func:`idtool._posterior._draws.fit_draws`). ``Fit.save`` writes the fit
+folder the command line writes, and ``idtool.load_fit`` reads it back into the same
+object: both hold a :class:`~idtool._fit._artefact.FitArtefact`, made by one
+constructor, so a fit read back behaves as the fresh one. Everything a notebook needs is
+here, with no private module in sight.
 """
 
 from __future__ import annotations

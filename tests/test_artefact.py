@@ -162,7 +162,10 @@ def test_a_posterior_sampled_from_either_is_the_same(fresh_and_loaded, tmp_path)
         for f, name in ((fresh, "a"), (loaded, "b")):
             (tmp_path / name).mkdir()  # the report names its folder
             texts.append(f.save_posterior(tmp_path / name).replace(str(tmp_path / name), "F"))
-        assert texts[0] == texts[1]
+        # equal but for the folder's name and the times taken (compiling, sampling)
+        assert [re.sub(r"\d+\.\d+ s\b", "T s", t) for t in texts[0:1]] == [
+            re.sub(r"\d+\.\d+ s\b", "T s", t) for t in texts[1:2]
+        ]
     finally:  # the fixture's fits are shared: leave them without a posterior
         for f in (fresh, loaded):
             f.posterior = None

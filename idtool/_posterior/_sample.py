@@ -193,7 +193,7 @@ def sample_posterior(
     """Sample the posterior of ``fit``'s shared parameters (module docstring).
 
     Args:
-        fit: a :class:`~idtool._fit._result.FitResult` or a stored fit (``idtool._fit._store``).
+        fit: what sampling needs of a fit (:class:`~idtool._posterior._record.FitLike`).
         walkers: ensemble size (default 32).
         steps: total chain length (a resumed chain is continued up to ``steps``); ``None``
             (the default) samples until the chain has converged
