@@ -257,7 +257,7 @@ def _compare_one(
 def _fit_bytes(fit: FitToCompare) -> list[bytes]:
     """What identifies a fit's answers: its ``fit.json`` and ``posterior.nc``."""
     if fit.folder is None:
-        return [json.dumps(fit.to_json(), sort_keys=True).encode()]
+        return [json.dumps(fit.artefact.doc, sort_keys=True).encode()]
     return [
         (fit.folder / name).read_bytes()
         for name in (FIT_JSON.name, POSTERIOR_FILE)
