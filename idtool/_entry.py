@@ -15,9 +15,9 @@ from pathlib import Path
 from idtool._data._dataset import Dataset, load_dataset
 from idtool._data._select import select_traces
 from idtool._errors import IdtoolError
-from idtool._fit._artefact import load_artefact
 from idtool._fit._parameter_table import parse_fix, read_parameter_table
 from idtool._fit._run import fit_dataset
+from idtool._fit._store import load_artefact
 from idtool._model._names import BY_DESIGN
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._settings import ParameterSetting

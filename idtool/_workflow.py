@@ -28,10 +28,11 @@ from idtool._data._select import select_traces
 from idtool._data._write import write_dataset
 from idtool._diagnostic import Diagnostic
 from idtool._errors import IdtoolError
-from idtool._fit._artefact import FitArtefact, fit_artefact, state_arrays, write_artefact
+from idtool._fit._artefact import FitArtefact, fit_artefact, state_arrays
 from idtool._fit._folder import FIT_STATE, RESIDUALS_PNG, TRACES_PNG, law_state_file
 from idtool._fit._result import Estimate, FitResult
 from idtool._fit._run import FitRun
+from idtool._fit._store import write_artefact
 from idtool._model._benchmodel import BenchModel
 from idtool._posterior._draws import fit_draws, stored_posterior
 from idtool._posterior._posterior import Posterior

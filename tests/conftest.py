@@ -80,8 +80,9 @@ def small_fit_folder(tmp_path_factory) -> Path:
     tests/test_arviz.py."""
     from sample_helpers import small_fit
 
-    from idtool._fit._artefact import fit_artefact, state_arrays, write_artefact
+    from idtool._fit._artefact import fit_artefact, state_arrays
     from idtool._fit._folder import FIT_STATE
+    from idtool._fit._store import write_artefact
     from idtool._report._fit_text import fit_json
 
     dataset, run = small_fit(1)

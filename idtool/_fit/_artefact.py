@@ -6,7 +6,7 @@ coupling law it kept (``fit_state*.npz``: the optimum ``z`` on the internal scal
 covariance, the noise parameters, the levels model's state). :func:`fit_artefact` is the
 one constructor: a fresh fit passes the documents it is about to write (the document
 passed through JSON, so it holds exactly what the file will), a loaded fit the ones it
-read (:func:`load_artefact`), so the two behave identically by construction. The record
+read (:func:`idtool._fit._store.load_artefact`), so the two behave identically by construction. The record
 carries the model spec as a typed :class:`ModelSpec`, the estimates, covariance, noise,
 levels, alternates (the other coupling laws predictions average over, each a
 :class:`LawFit` with its BIC weight) and the diagnostics.
@@ -21,17 +21,16 @@ from __future__ import annotations
 import dataclasses
 import json
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from idtool._data._blocks import FitData, prepare_fit_data
-from idtool._data._dataset import Dataset, load_dataset
+from idtool._data._blocks import FitData
+from idtool._data._dataset import Dataset
 from idtool._diagnostic import Diagnostic, from_records
 from idtool._errors import IdtoolError
 from idtool._fit._discrepancy import Conditioning
-from idtool._fit._folder import FIT_JSON, FIT_SCHEMA_VERSION, FIT_STATE, REPORT_TXT
+from idtool._fit._folder import FIT_STATE
 from idtool._fit._free_levels import FreeLevels
 from idtool._fit._level_design import discrepancy_conditioning
 from idtool._fit._result import Estimate, FitResult
@@ -44,11 +43,7 @@ __all__ = [
     "LawFit",
     "ModelSpec",
     "fit_artefact",
-    "load_artefact",
-    "read_fit_doc",
-    "read_states",
     "state_arrays",
-    "write_artefact",
 ]
 
 SdGrids = dict[str, tuple[np.ndarray, np.ndarray]]
@@ -328,86 +323,3 @@ def fit_artefact(
         doc=written,
         states={name: dict(arrays) for name, arrays in states.items()},
     )
-
-
-def read_fit_doc(folder: Path) -> dict[str, Any]:
-    """``fit.json`` of ``folder``, its schema version checked (none: version 1)."""
-    path = folder / FIT_JSON.name
-    if not path.is_file():
-        raise IdtoolError(f"{path}: not found; is {folder} the output of 'idtool fit'?")
-    try:
-        doc = json.loads(path.read_text())
-    except (ValueError, OSError) as err:
-        raise IdtoolError(f"{path}: unreadable fit ({err}); run 'idtool fit' again") from None
-    version = str(doc.get("schema_version", "1"))
-    if not version.isdigit() or int(version) > int(FIT_SCHEMA_VERSION):
-        raise IdtoolError(
-            f"{path}: schema version {version}, this idtool reads versions 1 to "
-            f"{FIT_SCHEMA_VERSION}; update idtool (or fit again with this one)"
-        )
-    return doc
-
-
-def write_artefact(folder: Path, artefact: FitArtefact) -> None:
-    """Write ``fit.json``, ``report.txt`` and the state files into ``folder``."""
-    (folder / FIT_JSON.name).write_text(json.dumps(artefact.doc, indent=1) + "\n")
-    (folder / REPORT_TXT.name).write_text(artefact.report_text + "\n")
-    for name, arrays in artefact.states.items():
-        np.savez(folder / name, **arrays)  # type: ignore[arg-type]  # numpy stubs: allow_pickle
-
-
-def read_states(folder: Path, doc: Mapping[str, Any]) -> dict[str, dict[str, np.ndarray]]:
-    """The state arrays of ``folder``'s fit: ``fit_state.npz`` and each kept law's."""
-    names = [FIT_STATE.name] + [
-        w["state_file"] for w in doc.get("coupling_laws", []) if "state_file" in w
-    ]
-    states = {}
-    for name in names:
-        path = folder / name
-        if not path.is_file():
-            raise IdtoolError(f"{path}: not found; is {folder} the output of 'idtool fit'?")
-        with np.load(path) as npz:
-            states[name] = {key: np.asarray(npz[key]) for key in npz.files}
-    return states
-
-
-def load_artefact(folder: str | Path) -> FitArtefact:
-    """Read the fit folder ``folder``; the dataset must still be where the fit found it,
-    unchanged (its sha256 is checked)."""
-    folder = Path(folder)
-    doc = read_fit_doc(folder)
-    doc_path = folder / FIT_JSON.name
-    try:
-        ds_info = doc["dataset"]
-        noise = doc["noise"]
-        mains_hz = float(noise["mains_hz"])
-        # The periods asked for rebuild the very blocks (prepare_fit_data chooses the
-        # same count again); a fit.json older than that field had block_s = periods / mains.
-        periods = int(noise.get("periods_requested", round(float(noise["block_s"]) * mains_hz)))
-        periods_used = int(noise.get("periods_per_block", periods))
-        source = str(noise.get("mains_source", "argument"))
-    except (ValueError, KeyError, TypeError) as err:
-        raise IdtoolError(f"{doc_path}: unreadable fit ({err}); run 'idtool fit' again") from None
-    states = read_states(folder, doc)
-    # A dataset saved with the fit (it lived in memory only) is recorded relative to it.
-    dataset = load_dataset(folder / ds_info["path"])
-    if dataset.sha256 != ds_info["sha256"]:
-        raise IdtoolError(
-            f"{ds_info['path']}: the dataset changed since the fit (sha256 "
-            f"{dataset.sha256[:12]}... instead of {ds_info['sha256'][:12]}...); fit it again"
-        )
-    fitted = ds_info.get("traces")  # a fit of some of the dataset's traces (--traces)
-    if fitted is not None and len(fitted) != len(dataset.traces):
-        by_id = {t.id: t for t in dataset.traces}
-        dataset = dataclasses.replace(dataset, traces=tuple(by_id[i] for i in fitted))
-    data = prepare_fit_data(
-        dataset, mains_hz=mains_hz, periods_per_block=periods, mains_source=source
-    )
-    if data.periods_per_block != periods_used:  # an old fit whose blocks were not whole periods
-        raise IdtoolError(
-            f"{doc_path}: the fit averaged over blocks of {periods_used} mains periods, this "
-            f"idtool makes blocks of {data.periods_per_block} whole periods; run 'idtool fit' again"
-        )
-    report_path = folder / REPORT_TXT.name
-    report = report_path.read_text() if report_path.is_file() else ""
-    return fit_artefact(doc, report, dataset, data, states)

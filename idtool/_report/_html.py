@@ -20,8 +20,9 @@ import numpy as np
 from idtool._atomic import atomic_output_dir, write_text_atomic
 from idtool._diagnostic import BANNER_CODES, banner_label, from_records, with_code
 from idtool._errors import IdtoolError
-from idtool._fit._artefact import FitArtefact, load_artefact
+from idtool._fit._artefact import FitArtefact
 from idtool._fit._folder import FIT_JSON, PPC_PNG, REPORT_HTML, REPORT_MD, RESIDUALS_PNG, TRACES_PNG
+from idtool._fit._store import load_artefact
 from idtool._fit._summary import VariabilitySummary
 from idtool._posterior._diagnostics import STOP_REASONS, import_arviz
 from idtool._posterior._draws import fit_draws, stored_posterior
