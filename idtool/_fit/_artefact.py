@@ -6,10 +6,11 @@ coupling law it kept (``fit_state*.npz``: the optimum ``z`` on the internal scal
 covariance, the noise parameters, the levels model's state). :func:`fit_artefact` is the
 one constructor: a fresh fit passes the documents it is about to write (the document
 passed through JSON, so it holds exactly what the file will), a loaded fit the ones it
-read (:func:`idtool._fit._store.load_artefact`), so the two behave identically by construction. The record
-carries the model spec as a typed :class:`ModelSpec`, the estimates, covariance, noise,
-levels, alternates (the other coupling laws predictions average over, each a
-:class:`LawFit` with its BIC weight) and the diagnostics.
+read (:func:`idtool._fit._store.load_artefact`), so the two behave identically by
+construction. The record carries the model spec as a typed :class:`ModelSpec`, the
+estimates, covariance, noise, levels, alternates (the other coupling laws predictions
+average over, each a :class:`LawFit` with its BIC weight), the diagnostics and what the
+report shows (:class:`~idtool._fit._summary.FitSummary`).
 
 The folder's files are named in :mod:`idtool._fit._folder`; ``fit.json`` is described by
 ``datasets_schema/fit.schema.json`` and carries its ``schema_version``: a fit.json
