@@ -4,6 +4,7 @@ results; the fit folder is declared once and documented; fit.json has a versione
 Schema, and a fit.json written before the version reads as version 1."""
 
 import dataclasses
+import importlib
 import json
 import re
 import shutil
@@ -220,3 +221,6 @@ def test_the_fit_folder_is_declared_once_and_documented():
     for f in FIT_FOLDER:
         if f.schema is not None:
             assert (ROOT / "datasets_schema" / f.schema).is_file()
+        for where in filter(None, (f.writer, f.reader)):  # each names a real function
+            module, name = where.split(":")
+            assert callable(getattr(importlib.import_module(module), name)), where

@@ -48,6 +48,10 @@ class FolderFile:
         name: its file name (``{law}`` stands for a coupling law's name).
         command: the ``idtool`` command that writes it.
         what: what it holds (for the documentation).
+        writer: the function that writes it (``module:function``; the stages above this
+            one write their own files, so they are named, not imported).
+        reader: the function that reads it back (``module:function``), or "" when
+            nothing does (figures, text reports, the report's own pages).
         schema_version: a JSON document's layout version (``None``: not versioned).
         schema: its JSON Schema in ``datasets_schema/`` (``None``: none published).
     """
@@ -55,6 +59,8 @@ class FolderFile:
     name: str
     command: str
     what: str
+    writer: str
+    reader: str = ""
     schema_version: str | None = None
     schema: str | None = None
 
@@ -63,30 +69,81 @@ class FolderFile:
         return self.name.format(law=law)
 
 
-FIT_JSON = FolderFile("fit.json", "fit", "the fit as data", FIT_SCHEMA_VERSION, "fit.schema.json")
-REPORT_TXT = FolderFile("report.txt", "fit", "the printed fit report")
+_STORE = "idtool._fit._store"
+_SAMPLE = "idtool._report._sample_text:write_posterior_outputs"
+FIT_JSON = FolderFile(
+    "fit.json",
+    "fit",
+    "the fit as data",
+    f"{_STORE}:write_artefact",
+    f"{_STORE}:read_fit_doc",
+    FIT_SCHEMA_VERSION,
+    "fit.schema.json",
+)
+REPORT_TXT = FolderFile(
+    "report.txt",
+    "fit",
+    "the printed fit report",
+    f"{_STORE}:write_artefact",
+    f"{_STORE}:load_artefact",
+)
 FIT_STATE = FolderFile(
-    "fit_state.npz", "fit", "the fit's internal state, for `sample` and `predict`"
+    "fit_state.npz",
+    "fit",
+    "the fit's internal state, for `sample` and `predict`",
+    f"{_STORE}:write_artefact",
+    f"{_STORE}:read_states",
 )
 LAW_STATE = FolderFile(
     "fit_state_{law}.npz",
     "fit",
     "another coupling law's internal state, for averaged predictions",
+    f"{_STORE}:write_artefact",
+    f"{_STORE}:read_states",
 )
-TRACES_PNG = FolderFile("traces.png", "fit", "every trace with the fit")
-RESIDUALS_PNG = FolderFile("residuals.png", "fit", "the residuals before and after AR(1) whitening")
+TRACES_PNG = FolderFile(
+    "traces.png", "fit", "every trace with the fit", "idtool._report._fit_text:plot_fit"
+)
+RESIDUALS_PNG = FolderFile(
+    "residuals.png",
+    "fit",
+    "the residuals before and after AR(1) whitening",
+    "idtool._report._fit_text:plot_fit",
+)
 VALIDATION_JSON = FolderFile(
-    "validation.json", "validate-fit", "held-out traces: force fit %, RMSE, FR against its band"
+    "validation.json",
+    "validate-fit",
+    "held-out traces: force fit %, RMSE, FR against its band",
+    "idtool._cli._validate_fit:_run",
+    "idtool._report._html_validation:validation_section",
 )
-CHAIN_H5 = FolderFile("chain.h5", "sample", "the emcee chain, every step")
-POSTERIOR_NC = FolderFile("posterior.nc", "sample", "ArviZ `InferenceData`")
+CHAIN_H5 = FolderFile(
+    "chain.h5",
+    "sample",
+    "the emcee chain, every step",
+    "idtool._posterior._chainfile:append_segment",
+    "idtool._posterior._chainfile:read_chain",
+)
+POSTERIOR_NC = FolderFile(
+    "posterior.nc",
+    "sample",
+    "ArviZ `InferenceData`",
+    "idtool._posterior._store:write_posterior",
+    "idtool._posterior._store:load_posterior",
+)
 SAMPLE_JSON = FolderFile(
-    "sample.json", "sample", "convergence diagnostics, priors, posterior predictive check"
+    "sample.json", "sample", "convergence diagnostics, priors, posterior predictive check", _SAMPLE
 )
-REPORT_SAMPLE_TXT = FolderFile("report_sample.txt", "sample", "the printed posterior report")
-PPC_PNG = FolderFile("ppc.png", "sample", "the posterior predictive check")
-REPORT_HTML = FolderFile("report.html", "report", "the report (self-contained)")
-REPORT_MD = FolderFile("report.md", "report", "the report as Markdown")
+REPORT_SAMPLE_TXT = FolderFile(
+    "report_sample.txt", "sample", "the printed posterior report", _SAMPLE
+)
+PPC_PNG = FolderFile("ppc.png", "sample", "the posterior predictive check", _SAMPLE)
+REPORT_HTML = FolderFile(
+    "report.html", "report", "the report (self-contained)", "idtool._report._html:write_report"
+)
+REPORT_MD = FolderFile(
+    "report.md", "report", "the report as Markdown", "idtool._report._html:write_report"
+)
 
 FIT_FOLDER: tuple[FolderFile, ...] = (
     FIT_JSON,
