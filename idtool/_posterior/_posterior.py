@@ -28,7 +28,7 @@ class Posterior(PosteriorRecord):
     average over, as the fit's own do (:func:`~idtool._posterior._draws.fit_draws`).
     """
 
-    fit: FitArtefact | None = None
+    fit: FitArtefact | None = dataclasses.field(default=None, repr=False, compare=False)
 
     def _draws(self, max_draws: int, seed: int = 0):
         """The prediction draws: the fit's path when the posterior knows its fit."""
