@@ -93,13 +93,13 @@ class LawFit:
     (sd values, posterior probabilities)) and state (free levels, sds), or none."""
 
     spec: ModelSpec
-    model: BenchModel
+    model: BenchModel = dataclasses.field(repr=False)
     z: np.ndarray
-    cov_z: np.ndarray
+    cov_z: np.ndarray = dataclasses.field(repr=False)
     phi: float
     sigma_n: float
-    sd_grids: SdGrids = dataclasses.field(default_factory=dict)
-    levels: Levels | None = None
+    sd_grids: SdGrids = dataclasses.field(default_factory=dict, repr=False)
+    levels: Levels | None = dataclasses.field(default=None, repr=False)
 
     @property
     def conditioning(self) -> Conditioning | None:
@@ -124,14 +124,15 @@ class FitArtefact:
         alternates: the other coupling laws predictions average over: law -> (BIC
             weight, its :class:`LawFit`).
         summary: what it reports besides (traces, derived quantities, correlations,
-            model comparison, levels model, provenance: :class:`~idtool._fit._summary.FitSummary`).
+            model comparison, levels model, provenance:
+            :class:`~idtool._fit._summary.FitSummary`).
         report_text: the printed fit report.
         doc: the ``fit.json`` document, as written.
         states: the state files' arrays by file name (:func:`state_arrays`).
     """
 
-    dataset: Dataset
-    data: FitData
+    dataset: Dataset = dataclasses.field(repr=False)
+    data: FitData = dataclasses.field(repr=False)
     chosen: LawFit
     estimates: dict[str, Estimate]
     optima: tuple[dict[str, Any], ...]
@@ -139,9 +140,9 @@ class FitArtefact:
     notes: tuple[str, ...]
     coupling_laws: dict[str, dict[str, Any]]
     alternates: dict[str, tuple[float, LawFit]]
-    summary: FitSummary
-    report_text: str
-    doc: dict[str, Any]
+    summary: FitSummary = dataclasses.field(repr=False)
+    report_text: str = dataclasses.field(repr=False)
+    doc: dict[str, Any] = dataclasses.field(repr=False)
     states: dict[str, dict[str, np.ndarray]] = dataclasses.field(repr=False, default_factory=dict)
 
     @property
