@@ -111,3 +111,23 @@ def test_without_the_compilation_cache_it_is_jax_jit_and_keeps_nothing(tmp_path)
     assert program._cache_size() == 1
     np.testing.assert_array_equal(out.slope, [1.5, 4.0])
     assert not any(tmp_path.iterdir())
+
+
+def test_the_command_line_keeps_the_programs_beside_its_compilation_cache(tmp_path):
+    """The console script switches JAX's cache on before JAX is imported (environment
+    variables): the programs' folder follows it."""
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "from idtool._cli._cache import enable_compilation_cache\n"
+        "enable_compilation_cache()\n"
+        "from idtool._fit._compiled import program_folder\n"
+        "print(program_folder())\n"
+    )
+    env = os.environ | {"IDTOOL_CACHE_DIR": str(tmp_path / "jax")}
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    assert out.stdout.strip() == str(tmp_path / "jax" / SUBFOLDER)
