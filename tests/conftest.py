@@ -141,7 +141,6 @@ FILE_SECONDS: dict[str, float] = {
     "tests/test_coupling_sdof.py": 300,
     "tests/test_coupling_laws.py": 290,
     "tests/test_transducer.py": 250,
-    "tests/test_server.py": 220,
     "tests/test_sample.py": 200,
     "tests/test_parameter_settings.py": 190,
     "tests/test_variability.py": 180,

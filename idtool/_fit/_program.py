@@ -8,7 +8,6 @@ a concern of the solver's, not of the model (:mod:`idtool._model._benchmodel`).
 
 from __future__ import annotations
 
-import functools
 import math
 
 import equinox as eqx
@@ -18,6 +17,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from idtool._data._blocks import FitData, padded_size
+from idtool._fit._compiled import program
 from idtool._fit._lm import ColouredJacobian, LMResult, levenberg_marquardt, normal_equations
 from idtool._model._benchmodel import BenchModel
 
@@ -78,7 +78,7 @@ def bench_normal_equations(
     return r, t.T @ jtj_u @ t, t.T @ jtr_u, (lv, dlv, jtj_u, jtr_u)
 
 
-@functools.partial(jax.jit, compiler_options=_COMPILE)
+@program(compiler_options=_COMPILE)
 def lm_program(
     model: BenchModel, structure: ColouredJacobian, z0, mask, phi, max_steps
 ) -> LMResult:
