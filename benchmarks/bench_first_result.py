@@ -12,15 +12,16 @@ the persistent compilation cache of the command line, in phases:
   it reported separately from ``jax.monitoring``, summed over threads: the fit compiles
   the next candidate models' programs in a thread of its own while it computes
   (``idtool._fit._prefetch``), so these can add up to more than the phase's time;
-* ``report``: the text report; ``save``: fit.json, fit_state.npz and the two figures.
+* ``report``: the text report (made inside ``idtool.fit`` with the fit's artefact, so this
+  phase reads it); ``save``: fit.json, fit_state.npz and the two figures.
 
 First with an empty cache folder (cold: what a new user waits), then three times with
 it warm (a repeated fit of a dataset of the same shape). Also ``import idtool`` alone
 against ``import jax`` alone (the floor).
 
-Then the same command through the console script with an idtool server running
-(``idtool server start``, :mod:`idtool._cli._server`), end to end as a shell sees it:
-the first fit in the server (it traces the programs once) and the repeated ones.
+The cache folder holds JAX's compiled programs and, beside them, idtool's traced ones
+(``idtool-programs/``, :mod:`idtool._fit._compiled`): a warm run neither traces nor
+compiles the fit's large programs. Cold empties both.
 
     python benchmarks/bench_first_result.py [--repeat 3]
 
@@ -87,10 +88,12 @@ json.dump({"phases": phases, "jax_in_fit": fit_jax,
 def run_once(cache: str, out: Path) -> dict:
     result = out.with_suffix(".json")
     env = os.environ | {"IDTOOL_CACHE_DIR": cache, "MPLBACKEND": "Agg"}
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), os.times()
     subprocess.run([sys.executable, "-c", RUN, str(out), str(result)], env=env, check=True)
+    c1 = os.times()
     doc = json.loads(result.read_text())
     doc["wall"] = time.perf_counter() - t0
+    doc["cpu"] = (c1.children_user - c0.children_user) + (c1.children_system - c0.children_system)
     return doc
 
 
@@ -103,33 +106,6 @@ def import_time(module: str, repeat: int) -> float:
     return min(times)
 
 
-def server_runs(cache: str, root: Path, repeat: int) -> list[float]:
-    """Wall times of ``idtool fit`` of the example through a server: the first, then
-    ``repeat`` more (each with its own output folder)."""
-    import idtool
-
-    idtool_bin = str(Path(sys.executable).with_name("idtool"))
-    env = os.environ | {"IDTOOL_CACHE_DIR": cache, "IDTOOL_SERVER_DIR": str(root / "srv")}
-    env.pop("IDTOOL_SERVER", None)
-    subprocess.run([idtool_bin, "server", "start"], env=env, check=True, capture_output=True)
-    try:
-        times = []
-        for i in range(1 + repeat):
-            out = str(root / f"server{i}")
-            command = [idtool_bin, "fit", str(idtool.example_dataset_path()), "--out", out, "-q"]
-            t0 = time.perf_counter()
-            subprocess.run(command, env=env, check=True)
-            times.append(time.perf_counter() - t0)
-        status = subprocess.run(
-            [idtool_bin, "server", "status", "--json"], env=env, check=True, capture_output=True
-        )
-        served = sum(s["served"] for s in json.loads(status.stdout)["servers"])
-        assert served == 1 + repeat, f"the server ran {served} of {1 + repeat} fits"
-        return times
-    finally:
-        subprocess.run([idtool_bin, "server", "stop"], env=env, check=True, capture_output=True)
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3, help="warm runs (default 3)")
@@ -139,7 +115,6 @@ def main() -> None:
         cache = str(root / "cache")
         cold = run_once(cache, root / "fit0")
         warm = [run_once(cache, root / f"fit{i + 1}") for i in range(args.repeat)]
-        served = server_runs(cache, root, args.repeat)
     names = list(cold["phases"])
     print(f"idtool fit of the example dataset, fresh interpreters (cpus: {os.cpu_count()})")
     print(f"{'phase':28s}{'cold [s]':>10s}{'warm median [s]':>18s}")
@@ -158,15 +133,15 @@ def main() -> None:
     total_c = sum(cold["phases"].values())
     total_w = statistics.median(sum(r["phases"].values()) for r in warm)
     wall_w = statistics.median(r["wall"] for r in warm)
+    cpu_w = statistics.median(r["cpu"] for r in warm)
     print(f"{'total in process':28s}{total_c:10.2f}{total_w:18.2f}")
     print(f"{'wall, with interpreter':28s}{cold['wall']:10.2f}{wall_w:18.2f}")
+    # CPU seconds of the process and its threads: what contention for the cores does not
+    # inflate (wall time on a shared machine can be twice the idle figure)
+    print(f"{'CPU, user + system':28s}{cold['cpu']:10.2f}{cpu_w:18.2f}")
+    print(f"load average at the end: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     kts = {round(r["Kt"], 3) for r in [cold, *warm]}
     print(f"Kt identical across runs: {len(kts) == 1}")
-    print(
-        f"through 'idtool server start': first fit {served[0]:.2f} s, repeated "
-        f"{statistics.median(served[1:]):.2f} s (median of {len(served) - 1}; "
-        f"{', '.join(f'{t:.2f}' for t in served[1:])}), wall, end to end"
-    )
     n = max(3, args.repeat)
     print(
         f"import idtool {import_time('idtool', n):.2f} s; import jax {import_time('jax', n):.2f} s"

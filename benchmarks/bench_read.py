@@ -11,7 +11,7 @@ peak resident memory, ``VmHWM``):
 * pyarrow + NumPy: ``pyarrow.csv.read_csv`` of every file, time and force as float64
   and the flag as bool, then every value finite, time strictly increasing, the median
   step, and the SHA-256 of the bytes: the least the check needs;
-* idtool: ``idtool validate DIR`` run in process (``IDTOOL_SERVER=off``): every check of
+* idtool: ``idtool validate DIR`` run in a fresh process: every check of
   the format, every file located problem, the summary table;
 * with ``--before PATH``: the same command from another checkout (``git worktree add
   /tmp/before main``) to measure a change;
@@ -126,7 +126,7 @@ def write_dataset(root: Path, n_rows: int, bad_cell: bool = False) -> int:
 
 def run(code: str, folder: Path, pythonpath: str | None) -> dict:
     """One fresh interpreter running ``code`` on ``folder``: wall time, status, peak."""
-    env = os.environ | {"IDTOOL_SERVER": "off", "MPLBACKEND": "Agg"}
+    env = os.environ | {"MPLBACKEND": "Agg"}
     if pythonpath is not None:
         env["PYTHONPATH"] = pythonpath
     t0 = time.perf_counter()

@@ -4,8 +4,17 @@ The public API, in the order of the pipeline (data -> model -> fit -> posterior 
 predict -> report); every name is documented in the README's "Python API" section and
 ``tests/test_api.py`` checks ``__all__`` against that list.
 
-Importing idtool switches JAX to 64-bit floats: the cycle averages and the fits need
-double precision (gradients are checked against finite differences at 1e-4).
+IMPORTING IDTOOL SWITCHES JAX TO 64-BIT FLOATS FOR THE WHOLE PROCESS
+(``jax_enable_x64``), for every other user of JAX in it too. It must: the cycle averages,
+the fits' normal equations and the likelihoods need double precision (gradients are
+checked against finite differences at 1e-4; in 32 bits the Levenberg-Marquardt steps
+stall at the float32 resolution of the loss, ~1e-7 of it), and idtool's arrays are made
+in many places, by its users too (a ``Dataset`` built by hand, a ``BenchModel`` called
+on ``jnp`` arrays, the README's script), before and after any one entry point: switched
+on only inside ``idtool.fit`` (``jax.enable_x64`` as a context), an array made outside
+it would be float32 and silently truncate the values passed in. A process that needs
+JAX in 32 bits should run idtool in a process of its own (its command line, or
+``multiprocessing``).
 """
 
 import importlib
@@ -108,87 +117,9 @@ _LAZY = {
     "load_fit": "idtool._entry",
 }
 
-__all__ = [
-    "ACTUATORS",
-    "COUPLINGS",
-    "FRICTION_LAWS",
-    "LEVEL_MODELS",
-    "NOISE_MODELS",
-    "OFFSETS",
-    "SEED_FIGURES",
-    "AbstractActuator",
-    "AbstractCoupling",
-    "AbstractFrictionLaw",
-    "AbstractLevelModel",
-    "AbstractNoise",
-    "AbstractOffset",
-    "AmplitudeFor",
-    "Amplitudes",
-    "BenchModel",
-    "BenchParams",
-    "BenchTruth",
-    "Comparison",
-    "ConstantCoupling",
-    "ConstantOffset",
-    "Coulomb",
-    "CreepingLevel",
-    "CycleAverage",
-    "Dahl",
-    "Dataset",
-    "DriftingOffset",
-    "EnergyBalance",
-    "Estimate",
-    "ExponentialCoupling",
-    "Fit",
-    "IdtoolError",
-    "LagActuator",
-    "LoadPowerCoupling",
-    "LuGre",
-    "Param",
-    "ParameterSetting",
-    "Posterior",
-    "PowerLimitedCoupling",
-    "Prediction",
-    "Predictions",
-    "Prior",
-    "RelaxingOnLevel",
-    "Rig",
-    "SdofCoupling",
-    "SlopeActuator",
-    "SteadyLevel",
-    "Trace",
-    "Transducer",
-    "TransducerSpec",
-    "TransducerSteadyState",
-    "Validation",
-    "__version__",
-    "bench_model",
-    "compare_fits",
-    "coulomb_friction_ratio",
-    "cycle_average_curve",
-    "dahl_small_lambda_friction_ratio",
-    "example_dataset_path",
-    "example_params_path",
-    "fit",
-    "import_daq",
-    "load_bench_params",
-    "load_dataset",
-    "load_fit",
-    "on_friction_ratio",
-    "plot_seed_study",
-    "prescribed_cycle_average",
-    "read_parameter_table",
-    "sdof_detuning_n_m",
-    "sdof_loss_stiffness_n_m",
-    "seed_study",
-    "simulate_bench",
-    "simulate_transducer",
-    "table2",
-    "transducer_steady_state",
-    "write_dataset",
-    "write_report",
-    "write_simulation",
-]
+# The one list of public names: __all__ is read from it, and the TYPE_CHECKING block
+# below (for type checkers and IDEs) is checked against it by tests/test_api.py.
+__all__ = ["__version__", *_LAZY]
 
 
 def __getattr__(name: str):
@@ -205,60 +136,158 @@ def __dir__() -> list[str]:
     return sorted(set(globals()) | set(_LAZY))
 
 
-if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerly
-    from idtool._data._dataset import Dataset, Rig, Trace, TransducerSpec, load_dataset
-    from idtool._data._example import example_dataset_path, example_params_path
-    from idtool._data._import import import_daq
-    from idtool._data._write import write_dataset
-    from idtool._entry import compare_fits, fit, load_fit
-    from idtool._errors import IdtoolError
-    from idtool._fit._parameter_table import read_parameter_table
-    from idtool._fit._result import Estimate
-    from idtool._model._actuator import ACTUATORS, AbstractActuator, LagActuator, SlopeActuator
-    from idtool._model._bench import on_friction_ratio
-    from idtool._model._benchmodel import BenchModel, bench_model
-    from idtool._model._contact import CycleAverage, cycle_average_curve, prescribed_cycle_average
+# For type checkers and IDEs: the names of _LAZY, imported eagerly, each as itself (an
+# explicit re-export; __all__ is not a literal they can read). tests/test_api.py checks
+# that it imports exactly _LAZY's names from their modules, and prints the block to
+# paste when they differ. Kept out of isort, which splits aliased imports one a line.
+# isort: off
+if TYPE_CHECKING:
+    from idtool._data._dataset import (
+        Dataset as Dataset,
+        load_dataset as load_dataset,
+        Rig as Rig,
+        Trace as Trace,
+        TransducerSpec as TransducerSpec,
+    )
+    from idtool._data._example import (
+        example_dataset_path as example_dataset_path,
+        example_params_path as example_params_path,
+    )
+    from idtool._data._import import (
+        import_daq as import_daq,
+    )
+    from idtool._data._write import (
+        write_dataset as write_dataset,
+    )
+    from idtool._entry import (
+        compare_fits as compare_fits,
+        fit as fit,
+        load_fit as load_fit,
+    )
+    from idtool._errors import (
+        IdtoolError as IdtoolError,
+    )
+    from idtool._fit._parameter_table import (
+        read_parameter_table as read_parameter_table,
+    )
+    from idtool._fit._result import (
+        Estimate as Estimate,
+    )
+    from idtool._model._actuator import (
+        AbstractActuator as AbstractActuator,
+        ACTUATORS as ACTUATORS,
+        LagActuator as LagActuator,
+        SlopeActuator as SlopeActuator,
+    )
+    from idtool._model._bench import (
+        on_friction_ratio as on_friction_ratio,
+    )
+    from idtool._model._benchmodel import (
+        bench_model as bench_model,
+        BenchModel as BenchModel,
+    )
+    from idtool._model._contact import (
+        cycle_average_curve as cycle_average_curve,
+        CycleAverage as CycleAverage,
+        prescribed_cycle_average as prescribed_cycle_average,
+    )
     from idtool._model._coupling import (
-        COUPLINGS,
-        AbstractCoupling,
-        ConstantCoupling,
-        ExponentialCoupling,
-        LoadPowerCoupling,
-        PowerLimitedCoupling,
-        SdofCoupling,
+        AbstractCoupling as AbstractCoupling,
+        ConstantCoupling as ConstantCoupling,
+        COUPLINGS as COUPLINGS,
+        ExponentialCoupling as ExponentialCoupling,
+        LoadPowerCoupling as LoadPowerCoupling,
+        PowerLimitedCoupling as PowerLimitedCoupling,
+        SdofCoupling as SdofCoupling,
     )
-    from idtool._model._coupling_sdof import sdof_detuning_n_m, sdof_loss_stiffness_n_m
-    from idtool._model._laws import FRICTION_LAWS, AbstractFrictionLaw, Coulomb, Dahl, LuGre
+    from idtool._model._coupling_sdof import (
+        sdof_detuning_n_m as sdof_detuning_n_m,
+        sdof_loss_stiffness_n_m as sdof_loss_stiffness_n_m,
+    )
+    from idtool._model._laws import (
+        AbstractFrictionLaw as AbstractFrictionLaw,
+        Coulomb as Coulomb,
+        Dahl as Dahl,
+        FRICTION_LAWS as FRICTION_LAWS,
+        LuGre as LuGre,
+    )
     from idtool._model._level_model import (
-        LEVEL_MODELS,
-        AbstractLevelModel,
-        CreepingLevel,
-        RelaxingOnLevel,
-        SteadyLevel,
+        AbstractLevelModel as AbstractLevelModel,
+        CreepingLevel as CreepingLevel,
+        LEVEL_MODELS as LEVEL_MODELS,
+        RelaxingOnLevel as RelaxingOnLevel,
+        SteadyLevel as SteadyLevel,
     )
-    from idtool._model._limits import coulomb_friction_ratio, dahl_small_lambda_friction_ratio
-    from idtool._model._noise import NOISE_MODELS, AbstractNoise
-    from idtool._model._offset import OFFSETS, AbstractOffset, ConstantOffset, DriftingOffset
-    from idtool._model._params import Param
-    from idtool._model._seed_study import SEED_FIGURES, plot_seed_study, seed_study
-    from idtool._model._settings import ParameterSetting
+    from idtool._model._limits import (
+        coulomb_friction_ratio as coulomb_friction_ratio,
+        dahl_small_lambda_friction_ratio as dahl_small_lambda_friction_ratio,
+    )
+    from idtool._model._noise import (
+        AbstractNoise as AbstractNoise,
+        NOISE_MODELS as NOISE_MODELS,
+    )
+    from idtool._model._offset import (
+        AbstractOffset as AbstractOffset,
+        ConstantOffset as ConstantOffset,
+        DriftingOffset as DriftingOffset,
+        OFFSETS as OFFSETS,
+    )
+    from idtool._model._params import (
+        Param as Param,
+    )
+    from idtool._model._seed_study import (
+        plot_seed_study as plot_seed_study,
+        SEED_FIGURES as SEED_FIGURES,
+        seed_study as seed_study,
+    )
+    from idtool._model._settings import (
+        ParameterSetting as ParameterSetting,
+    )
     from idtool._model._transducer import (
-        EnergyBalance,
-        Transducer,
-        TransducerSteadyState,
-        simulate_transducer,
-        table2,
-        transducer_steady_state,
+        EnergyBalance as EnergyBalance,
+        simulate_transducer as simulate_transducer,
+        table2 as table2,
+        Transducer as Transducer,
+        transducer_steady_state as transducer_steady_state,
+        TransducerSteadyState as TransducerSteadyState,
     )
-    from idtool._posterior._posterior import Posterior
-    from idtool._posterior._prior import Prior
-    from idtool._predict._amplitude import AmplitudeFor
-    from idtool._predict._predict import Prediction
-    from idtool._predict._tables import Amplitudes, Predictions
-    from idtool._predict._validation import Validation
-    from idtool._report._compare import Comparison
-    from idtool._report._html import write_report
-    from idtool._simulate._params import BenchParams, load_bench_params
-    from idtool._simulate._simulate import simulate_bench, write_simulation
-    from idtool._simulate._truth import BenchTruth
-    from idtool._workflow import Fit
+    from idtool._posterior._posterior import (
+        Posterior as Posterior,
+    )
+    from idtool._posterior._prior import (
+        Prior as Prior,
+    )
+    from idtool._predict._amplitude import (
+        AmplitudeFor as AmplitudeFor,
+    )
+    from idtool._predict._predict import (
+        Prediction as Prediction,
+    )
+    from idtool._predict._tables import (
+        Amplitudes as Amplitudes,
+        Predictions as Predictions,
+    )
+    from idtool._predict._validation import (
+        Validation as Validation,
+    )
+    from idtool._report._compare import (
+        Comparison as Comparison,
+    )
+    from idtool._report._html import (
+        write_report as write_report,
+    )
+    from idtool._simulate._params import (
+        BenchParams as BenchParams,
+        load_bench_params as load_bench_params,
+    )
+    from idtool._simulate._simulate import (
+        simulate_bench as simulate_bench,
+        write_simulation as write_simulation,
+    )
+    from idtool._simulate._truth import (
+        BenchTruth as BenchTruth,
+    )
+    from idtool._workflow import (
+        Fit as Fit,
+    )
+# isort: on

@@ -17,7 +17,7 @@ from idtool._data._select import select_traces
 from idtool._errors import IdtoolError
 from idtool._fit._parameter_table import parse_fix, read_parameter_table
 from idtool._fit._run import fit_dataset
-from idtool._fit._store import load_stored_fit
+from idtool._fit._store import load_artefact
 from idtool._model._names import BY_DESIGN
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._settings import ParameterSetting
@@ -128,17 +128,14 @@ def fit(
         progress=progress,
         settings=settings,
     )
-    out = Fit(dataset, run.chosen, run)
-    out.seconds = time.perf_counter() - started
-    return out
+    return Fit.from_run(dataset, run, seconds=time.perf_counter() - started)
 
 
 def load_fit(path: str | os.PathLike) -> Fit:
     """Read a fit folder written by :meth:`Fit.save` (or ``idtool fit``), with its
     posterior if ``posterior.nc`` is beside it. The dataset must still be where the fit
     found it, unchanged (its sha256 is checked)."""
-    stored = load_stored_fit(Path(path))
-    return Fit(stored.dataset, stored, None, Path(path))
+    return Fit(load_artefact(Path(path)), None, Path(path))
 
 
 def compare_fits(

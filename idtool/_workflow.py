@@ -4,9 +4,11 @@
 the :class:`Fit` it returns carries the estimates and their intervals, the text
 report, and (after :meth:`Fit.sample`) the posterior. Predictions come from the
 posterior when there is one, else from Gaussian draws on the fit's covariance, and say
-which. ``Fit.save`` writes the fit folder the command line writes, and
-``idtool.load_fit`` reads it back. Everything a notebook needs is here, with no private
-module in sight.
+which (one path: :func:`idtool._posterior._draws.fit_draws`). ``Fit.save`` writes the fit
+folder the command line writes, and ``idtool.load_fit`` reads it back into the same
+object: both hold a :class:`~idtool._fit._artefact.FitArtefact`, made by one
+constructor, so a fit read back behaves as the fresh one. Everything a notebook needs is
+here, with no private module in sight.
 """
 
 from __future__ import annotations
@@ -14,8 +16,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import time
-from collections.abc import Mapping, Sequence
+import shutil
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -24,21 +26,24 @@ from idtool._atomic import atomic_output_dir
 from idtool._data._dataset import Dataset, load_dataset
 from idtool._data._select import select_traces
 from idtool._data._write import write_dataset
-from idtool._diagnostic import Diagnostic, from_records
+from idtool._diagnostic import Diagnostic
 from idtool._errors import IdtoolError
+from idtool._fit._artefact import FitArtefact, fit_artefact, state_arrays
+from idtool._fit._folder import FIT_STATE, RESIDUALS_PNG, TRACES_PNG, law_state_file
 from idtool._fit._result import Estimate, FitResult
 from idtool._fit._run import FitRun
-from idtool._fit._store import StoredFit, law_state_file, save_fit_state
+from idtool._fit._store import write_artefact
 from idtool._model._benchmodel import BenchModel
-from idtool._posterior._draws import draws_from_posterior, draws_from_stored
+from idtool._posterior._draws import fit_draws, stored_posterior
 from idtool._posterior._posterior import Posterior
+from idtool._posterior._record import PosteriorRecord
 from idtool._posterior._runner import MAX_MINUTES, MAX_STEPS
 from idtool._posterior._sample import sample_posterior
-from idtool._posterior._store import POSTERIOR_FILE, load_posterior
-from idtool._predict._mixture import average_over_laws, chosen_law_weight
-from idtool._predict._predict import Draws, draws_from_covariance
+from idtool._posterior._store import PosteriorDraws
+from idtool._predict._predict import Draws
 from idtool._predict._tables import Amplitudes, Predictions, amplitude_table, predict_table
 from idtool._predict._validation import Validation, validate
+from idtool._provenance import provenance
 from idtool._report._fit_text import fit_json, fit_report, plot_fit
 from idtool._report._sample_text import write_posterior_outputs
 
@@ -47,10 +52,14 @@ __all__ = ["Fit"]
 
 class Fit:
     """One identified dataset: the chosen model, its estimates, every candidate, and
-    the posterior once sampled. Made by :func:`fit` or :func:`load_fit`.
+    the posterior once sampled. Made by :func:`fit` or :func:`load_fit`, which give the
+    same object: everything but :attr:`run` and :attr:`result` (the candidates, in
+    memory only) comes from its :class:`~idtool._fit._artefact.FitArtefact`, built the
+    same way from the documents a fresh fit writes and a loaded one reads.
 
     Attributes:
         dataset: the :class:`~idtool.Dataset` fitted.
+        artefact: the fit as a typed record (:class:`~idtool._fit._artefact.FitArtefact`).
         model: the chosen :class:`~idtool.BenchModel` (law, coupling, noise model).
         estimates: every parameter's :class:`~idtool.Estimate` (value, standard error,
             95% interval, unit), physical ones first.
@@ -59,101 +68,103 @@ class Fit:
 
     def __init__(
         self,
-        dataset: Dataset,
-        state: FitResult | StoredFit,
+        artefact: FitArtefact,
         run: FitRun | None = None,
         folder: Path | None = None,
     ):
-        self.dataset = dataset
-        self._state = state
+        self.artefact = artefact
+        self.dataset = artefact.dataset
         self.run = run
         self.folder = folder
         self.posterior: Posterior | None = None
-        self.seconds = 0.0  # time the fit took [s]
+
+    @classmethod
+    def from_run(
+        cls,
+        dataset: Dataset,
+        run: FitRun,
+        seconds: float = 0.0,
+        command: Sequence[str] | None = None,
+    ) -> Fit:
+        """The fit of a fresh run: its artefact made from the documents it writes
+        (``fit.json`` with ``seconds`` [s], the time the fit took; the report; the state
+        of each kept law), so it behaves as the same fit read back does."""
+        path = None if dataset.path is None else str(Path(dataset.path).resolve())
+        doc = fit_json(run, path, None if command is None else list(command))
+        doc["seconds"] = round(seconds, 2)
+        return cls(fit_artefact(doc, fit_report(run), dataset, run.data, _states(run)), run)
 
     # ------------------------------------------------------------------ what it found
     @property
     def model(self) -> BenchModel:
-        return self._state.model
+        return self.artefact.model
 
     @property
     def z(self) -> np.ndarray:
         """The optimum on the internal scale (all parameters, nuisances included)."""
-        return self._state.z
+        return self.artefact.chosen.z
 
     @property
     def cov_z(self) -> np.ndarray:
-        return self._state.cov_z
+        return self.artefact.chosen.cov_z
 
     @property
     def phi(self) -> float:
-        return self._state.phi
+        return self.artefact.chosen.phi
 
     @property
     def sigma_n(self) -> float:
-        return self._state.sigma_n
+        return self.artefact.chosen.sigma_n
+
+    @property
+    def seconds(self) -> float:
+        """The time the fit took [s]."""
+        return float(self.artefact.doc.get("seconds", 0.0))
 
     @property
     def levels(self):
         """The levels model's (free levels, sds), or None (``variability=False``)."""
-        return self._state.levels
+        return self.artefact.chosen.levels
 
     @property
     def conditioning(self):
         """What predictions condition the discrepancy on (the traces' own friction
         ratios), or None (``variability=False``)."""
-        return self._state.conditioning
+        return self.artefact.chosen.conditioning
 
     @property
     def estimates(self) -> dict[str, Estimate]:
-        if isinstance(self._state, FitResult):
-            return self._state.estimates
-        return self._state.estimates()
+        return self.artefact.estimates
 
     @property
     def optima(self) -> list[dict]:
         """The multi-start's distinct optima (``rss``, internal physical ``z``)."""
-        return self._state.optima
+        return list(self.artefact.optima)
 
     @property
     def warnings(self) -> list[str]:
-        return self._sentences("warnings")
+        return list(self.artefact.warnings)
 
     @property
     def notes(self) -> list[str]:
         """What the data let the fit measure (one trace per operating point, ON windows
         too short to settle): facts for the report, not doubts (:attr:`warnings`)."""
-        return self._sentences("notes")
+        return list(self.artefact.notes)
 
     @property
     def coupling_laws(self) -> dict[str, dict[str, float | str]]:
         """Each fitted coupling law (best first): its best candidate model's ``key``,
-        ``bic``, ``aic`` and Akaike/Schwarz weights (``bic_weight``, ``aic_weight``):
-        several with ``coupling="auto"``, else the one law at weight 1. In memory or
-        from ``fit.json``."""
-        if self.run is not None:
-            return {n: w.to_dict() for n, w in self.run.coupling_weights.items()}
-        doc = self._state.doc if isinstance(self._state, StoredFit) else {}
-        return {w["law"]: w for w in doc.get("coupling_laws", [])}
-
-    def _sentences(self, key: str) -> list[str]:
-        """The fit's ``warnings`` or ``notes``: in memory, or from ``fit.json``: its
-        ``diagnostic_records`` (codes and values kept), else the plain sentences of a fit
-        written before them (and before notes existed: none)."""
-        if isinstance(self._state, FitResult):
-            return list(getattr(self._state, key))
-        doc = self._state.doc
-        if "diagnostic_records" in doc:
-            severity = "warning" if key == "warnings" else "note"
-            return [d for d in from_records(doc["diagnostic_records"]) if d.severity == severity]
-        return list(doc.get(key, []))
+        ``bic``, ``aic`` and Akaike/Schwarz weights (``bic_weight``, ``aic_weight``),
+        and the ``state_file`` of each other law predictions average over: several with
+        ``coupling="auto"``, else the one law at weight 1."""
+        return dict(self.artefact.coupling_laws)
 
     @property
     def result(self) -> FitResult:
         """The chosen model's full fit result (in memory only, not after load_fit)."""
-        if not isinstance(self._state, FitResult):
+        if self.run is None:
             raise IdtoolError("a fit read back from disk keeps its estimates, not its result")
-        return self._state
+        return self.run.chosen
 
     def __repr__(self) -> str:
         phys = ", ".join(f"{n}={self.estimates[n].estimate:.4g}" for n in self.model.physical_names)
@@ -166,10 +177,7 @@ class Fit:
     def report(self) -> str:
         """The fit report a person reads (estimates, intervals, correlations, model
         comparison, friction ratio per operating point, warnings)."""
-        if self.run is not None:
-            return fit_report(self.run)
-        assert self.folder is not None
-        return (self.folder / "report.txt").read_text().rstrip("\n")
+        return self.artefact.report_text
 
     # ------------------------------------------------------------------ posterior
     def sample(
@@ -194,7 +202,7 @@ class Fit:
         ``steps`` runs a fixed length instead. ``chain_path`` checkpoints the chain
         (``chain.h5``) every ``checkpoint_s`` seconds; ``resume`` continues it. The same
         seed gives the same chain."""
-        self.posterior = sample_posterior(
+        sampled = sample_posterior(
             self,
             walkers=walkers,
             steps=steps,
@@ -208,6 +216,8 @@ class Fit:
             max_steps=max_steps,
             max_minutes=max_minutes,
         )
+        # its predictions average over the coupling laws the fit kept, as the fit's do
+        self.posterior = dataclasses.replace(sampled, fit=self.artefact)
         return self.posterior
 
     def save_posterior(
@@ -226,27 +236,10 @@ class Fit:
     def draws(self, max_draws: int = 2000, seed: int = 0) -> Draws:
         """Draws of the physical parameters: the posterior's if sampled (in memory or
         ``posterior.nc`` beside a loaded fit), else Gaussian on the fit's covariance."""
-        grids, cond = self._state.sd_grids, self._state.conditioning
-        if self.posterior is not None:
-            draws = draws_from_posterior(self.posterior, self.model, max_draws, grids, seed, cond)
-        elif self.folder is not None and (self.folder / POSTERIOR_FILE).is_file():
-            stored = load_posterior(self.folder / POSTERIOR_FILE)
-            draws = draws_from_stored(stored, self.model, max_draws, grids, seed, cond)
-        else:
-            draws = draws_from_covariance(
-                self.model, self.z, self.cov_z, max_draws, seed, grids, cond
-            )
-        # averaged over the coupling laws the fit kept (fit coupling="auto")
-        others: Mapping[str, tuple[float, FitResult | StoredFit]]
-        if self.run is not None:
-            laws = self.run.coupling_weights
-            others = {law: (laws[law].bic_weight, f) for law, f in self.run.alternates.items()}
-            weight = laws[self.model.coupling.name].bic_weight
-        else:
-            assert isinstance(self._state, StoredFit)
-            others = self._state.alternates
-            weight = chosen_law_weight(self._state.doc, self.model.coupling.name)
-        return average_over_laws(draws, weight, others, seed)
+        posterior: PosteriorRecord | PosteriorDraws | None = self.posterior
+        if posterior is None and self.folder is not None:
+            posterior = stored_posterior(self.folder)
+        return fit_draws(self.artefact, posterior, max_draws, seed)
 
     # ------------------------------------------------------------------ predictions
     def predict(
@@ -275,7 +268,7 @@ class Fit:
         (eq. R2 of :mod:`idtool._model._level_model`), from the traces' rises."""
         if not any(g == "on_rise" for g, _, _ in self.model.level.trace_params):
             return None
-        values = self.model.values(np.asarray(self._state.z, float))
+        values = self.model.values(np.asarray(self.z, float))
         rises = np.atleast_1d(np.asarray(values["on_rise"], float))
         tau = float(values["on_relax_time_s"])
         return Diagnostic(
@@ -350,12 +343,12 @@ class Fit:
 
     # ------------------------------------------------------------------ files
     def to_json(self, command: Sequence[str] | None = None) -> dict:
-        """The ``fit.json`` document (schema in the README)."""
-        if self.run is None:
-            assert isinstance(self._state, StoredFit)
-            return self._state.doc
-        path = None if self.dataset.path is None else str(Path(self.dataset.path).resolve())
-        return fit_json(self.run, path, None if command is None else list(command))
+        """The ``fit.json`` document (``datasets_schema/fit.schema.json``); ``command``
+        replaces the recorded one."""
+        doc = json.loads(json.dumps(self.artefact.doc))
+        if command is not None:
+            doc["command"] = provenance(list(command))["command"]
+        return doc
 
     def save(
         self,
@@ -369,23 +362,32 @@ class Fit:
         with ``plots``, ``traces.png`` and ``residuals.png``) all or nothing; an
         existing folder is replaced only with ``force``. A dataset that lives in memory
         only (simulated) is written into the folder's ``dataset/`` so the fit can be
-        read back. ``command`` is recorded as provenance (default: the process's)."""
-        if self.run is None:
-            raise IdtoolError("this fit was read from disk; it is saved already")
-        started = time.perf_counter()
+        read back. ``command`` is recorded as provenance (default: the one recorded when
+        the fit was made). A fit read back is written again the same way, its plots
+        copied from its folder."""
         out = Path(path)
+        doc = self.to_json(command)
+        recorded = doc["dataset"]["path"]
         with atomic_output_dir(out, force=force) as tmp:
-            doc = self.to_json(command)
             if self.dataset.path is None:
                 write_dataset(self.dataset, tmp / "dataset")
                 doc["dataset"]["path"] = "dataset"  # relative to the fit folder
-            doc["seconds"] = round(self.seconds + time.perf_counter() - started, 2)
-            (tmp / "fit.json").write_text(json.dumps(doc, indent=1) + "\n")
-            (tmp / "report.txt").write_text(self.report() + "\n")
-            save_fit_state(tmp, self.result)
-            for law, alternate in self.run.alternates.items():  # for averaged predictions
-                save_fit_state(tmp, alternate, law_state_file(law))
-            if plots:
+            elif self.folder is not None and not Path(recorded).is_absolute():
+                # read back with the dataset saved in its folder: the very files along
+                shutil.copytree(self.folder / recorded, tmp / recorded)
+            write_artefact(tmp, dataclasses.replace(self.artefact, doc=doc))
+            if plots and self.run is not None:
                 plot_fit(self.run, tmp)
+            elif plots and self.folder is not None:
+                for plot in (TRACES_PNG, RESIDUALS_PNG):
+                    if (self.folder / plot.name).is_file():
+                        shutil.copyfile(self.folder / plot.name, tmp / plot.name)
+        self.artefact = dataclasses.replace(self.artefact, doc=json.loads(json.dumps(doc)))
         self.folder = out
         return out
+
+
+def _states(run: FitRun) -> dict[str, dict[str, np.ndarray]]:
+    """The state arrays of a run's chosen fit and of each law it kept, by file name."""
+    out = {FIT_STATE.name: state_arrays(run.chosen)}
+    return out | {law_state_file(law): state_arrays(f) for law, f in run.alternates.items()}

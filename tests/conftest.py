@@ -3,7 +3,6 @@ when compiled programs are dropped, and the order in which two xdist workers tak
 files."""
 
 import gc
-import json
 import os
 from pathlib import Path
 
@@ -81,7 +80,9 @@ def small_fit_folder(tmp_path_factory) -> Path:
     tests/test_arviz.py."""
     from sample_helpers import small_fit
 
-    from idtool._fit._store import save_fit_state
+    from idtool._fit._artefact import fit_artefact, state_arrays
+    from idtool._fit._folder import FIT_STATE
+    from idtool._fit._store import write_artefact
     from idtool._report._fit_text import fit_json
 
     dataset, run = small_fit(1)
@@ -90,8 +91,8 @@ def small_fit_folder(tmp_path_factory) -> Path:
     out = root / "fits" / "small"
     out.mkdir(parents=True)
     doc = fit_json(run, str(data_dir.resolve()), ["fit", str(data_dir), "--out", str(out)])
-    (out / "fit.json").write_text(json.dumps(doc))
-    save_fit_state(out, run.chosen)
+    states = {FIT_STATE.name: state_arrays(run.chosen)}
+    write_artefact(out, fit_artefact(doc, "", dataset, run.data, states))
     return out
 
 
@@ -140,7 +141,6 @@ FILE_SECONDS: dict[str, float] = {
     "tests/test_coupling_sdof.py": 300,
     "tests/test_coupling_laws.py": 290,
     "tests/test_transducer.py": 250,
-    "tests/test_server.py": 220,
     "tests/test_sample.py": 200,
     "tests/test_parameter_settings.py": 190,
     "tests/test_variability.py": 180,

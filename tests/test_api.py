@@ -1,6 +1,7 @@
 """The public Python API: the documented names, no private imports in what users read,
 the README's notebook-style script, and a coupling law added from outside the package."""
 
+import importlib
 import json
 import re
 from pathlib import Path
@@ -157,6 +158,44 @@ def test_fit_predicts_in_memory_from_covariance_then_posterior():
     assert set(idata.posterior.data_vars) >= {"Kt", "mu"} | extra
     need = post.amplitude_for(40.0, [270.0, 670.0])
     assert [a.normal_load_n for a in need] == [270.0, 670.0]
+
+
+def _type_checking_block(lazy: dict[str, str]) -> str:
+    """The TYPE_CHECKING block of idtool/__init__.py for the lazy table ``lazy``."""
+    by_module: dict[str, list[str]] = {}
+    for name, module in lazy.items():
+        by_module.setdefault(module, []).append(name)
+    lines = ["if TYPE_CHECKING:"]
+    for module in sorted(by_module):
+        lines.append(f"    from {module} import (")
+        lines += [f"        {n} as {n}," for n in sorted(by_module[module], key=str.lower)]
+        lines.append("    )")
+    return "\n".join(lines)
+
+
+def test_the_type_checking_imports_are_the_lazy_table():
+    """One list of public names (``idtool._LAZY``): the eager imports type checkers read
+    name the same objects from the same modules, each re-exported as itself."""
+    import ast
+
+    tree = ast.parse((ROOT / "idtool" / "__init__.py").read_text())
+    (block,) = [
+        node
+        for node in tree.body
+        if isinstance(node, ast.If) and ast.unparse(node.test) == "TYPE_CHECKING"
+    ]
+    imported = {
+        alias.name: (node.module, alias.asname)
+        for node in block.body
+        if isinstance(node, ast.ImportFrom)
+        for alias in node.names
+    }
+    expected = {name: (module, name) for name, module in idtool._LAZY.items()}
+    assert imported == expected, "paste into idtool/__init__.py:\n" + _type_checking_block(
+        idtool._LAZY
+    )
+    for name, module in idtool._LAZY.items():  # each module defines what it is said to
+        assert hasattr(importlib.import_module(module), name), (module, name)
 
 
 def test_every_public_name_resolves_lazily():

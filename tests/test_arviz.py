@@ -20,7 +20,6 @@ from scipy.stats import multivariate_normal
 
 import idtool
 from idtool._cli._main import main
-from idtool._fit._store import load_stored_fit
 from idtool._posterior._groups import MAX_DRAWS, thinned_steps
 from idtool._posterior._levels import _mean_and_cholesky, build_levels_target, levels_params
 from idtool._posterior._prior import default_prior
@@ -102,7 +101,7 @@ def test_levels_pointwise_terms_are_leave_one_trace_out_densities(levels):
     mean g_T + C_T,-T C_-T,-T^-1 (y_-T - g_-T), covariance C_TT - C_T,-T C_-T,-T^-1
     C_-T,T."""
     idata = az.from_netcdf(str(levels / "posterior.nc"))
-    fit = load_stored_fit(levels)
+    fit = idtool.load_fit(levels)
     free = fit.levels[0]
     params = levels_params(fit.model, free)
     target = build_levels_target(fit.model, free, {p.name: default_prior(p) for p in params})

@@ -242,6 +242,6 @@ def test_a_saved_fit_keeps_the_laws_it_averages(comparable):
     for other in others:
         assert (folder / files[other]).is_file()
     back = idtool.load_fit(folder)
-    assert set(back._state.alternates) == others
+    assert set(back.artefact.alternates) == others
     a, b = fit.predict(60.0, 0.5)[0], back.predict(60.0, 0.5)[0]
     assert (a.median, a.ci95, a.by_law) == (b.median, b.ci95, b.by_law)

@@ -235,7 +235,7 @@ def test_fit_json_records_the_mains_and_load_fit_rebuilds_the_blocks(tmp_path, l
 
     data, result = fit60
     run = FitRun(data, result, {"dahl/constant": result}, "test", 0)
-    folder = Fit(loud60, result, run).save(tmp_path / "fit", plots=False)
+    folder = Fit.from_run(loud60, run).save(tmp_path / "fit", plots=False)
     doc = json.loads((folder / "fit.json").read_text())
     noise = doc["noise"]
     assert (noise["mains_hz"], noise["mains_source"]) == (60.0, "detected")

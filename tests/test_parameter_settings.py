@@ -96,7 +96,7 @@ def test_a_saved_fit_keeps_its_settings_and_the_sampler_skips_them(fixed_at_trut
     back = idtool.load_fit(out)
     assert back.model.fixed == {"mu": truth()["mu"]}
     assert back.estimates["mu"].fixed
-    _, params, _ = _resolve(back._state, "ar1", None, None)  # the stored fit
+    _, params, _ = _resolve(back.artefact.chosen, "ar1", None, None)  # the stored fit
     assert "mu" not in [p.name for p in params] and "Kt" in [p.name for p in params]
     page = idtool.write_report(out).read_text()
     row = page[page.index("<td>mu</td>") :].split("</tr>")[0]

@@ -6,10 +6,9 @@ import shutil
 import numpy as np
 import pytest
 
+import idtool
 from idtool._cli._main import main
-from idtool._fit._store import load_stored_fit
 from idtool._posterior._diagnostics import import_arviz
-from idtool._posterior._draws import prediction_draws
 from idtool._predict._amplitude import amplitude_for_reduction
 from idtool._predict._predict import predict_friction_ratio
 
@@ -117,8 +116,7 @@ def test_amplitude_for_a_target_reduction_and_out_of_reach(sampled, capsys):
     alpha = inv["amplitude_fraction"]["median"]
     assert 0 < lo <= alpha <= hi <= 1
     # forward check: at that amplitude the median reduction is the target
-    fit = load_stored_fit(sampled)
-    draws = prediction_draws(fit, max_draws=500)
+    draws = idtool.load_fit(sampled).draws(500)
     (p,) = predict_friction_ratio(draws, [450.0], [alpha], [0.025])
     assert p.median == pytest.approx(0.5, abs=0.01)
 

@@ -245,8 +245,6 @@ def test_the_answer_comes_first_with_its_bands(fitted):
     """The first section gives FR, reduction and a next pull's band at every tested load
     x amplitude (270/670 N x 50/70%), the numbers of idtool's own prediction from the
     same draws, and what the traces measured there; then the amplitude for 30 and 50%."""
-    from idtool._fit._store import load_stored_fit
-    from idtool._posterior._draws import prediction_draws
     from idtool._predict._tables import predict_table
 
     page = (fitted / "report.html").read_text()
@@ -254,8 +252,8 @@ def test_the_answer_comes_first_with_its_bands(fitted):
     answer = _answer(page)
     rows = re.findall(r"<tr>(.*?)</tr>", answer.split("Commanded amplitude")[0])[1:]
     assert len(rows) == 4
-    fit = load_stored_fit(fitted)
-    draws = prediction_draws(fit, max_draws=400)
+    fit = idtool.load_fit(fitted)
+    draws = fit.draws(400)
     doc = json.loads((fitted / "fit.json").read_text())
     for row, p in zip(
         rows, predict_table(draws, fit.model.data, [270.0, 670.0], [0.5, 0.7]), strict=True

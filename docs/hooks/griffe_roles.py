@@ -20,13 +20,14 @@ INIT = Path(__file__).resolve().parents[2] / "idtool" / "__init__.py"
 
 
 def public_names() -> frozenset[str]:
-    """``idtool.__all__``, read from the source (nothing is imported)."""
+    """``idtool.__all__``, read from the source (nothing is imported): ``__version__``
+    and the keys of the lazy table ``_LAZY``, the one list of public names."""
     for node in ast.parse(INIT.read_text()).body:
         if isinstance(node, ast.Assign) and any(
-            isinstance(t, ast.Name) and t.id == "__all__" for t in node.targets
+            isinstance(t, ast.Name) and t.id == "_LAZY" for t in node.targets
         ):
-            return frozenset(ast.literal_eval(node.value))
-    raise RuntimeError(f"no __all__ in {INIT}")
+            return frozenset({"__version__", *ast.literal_eval(node.value)})
+    raise RuntimeError(f"no _LAZY in {INIT}")
 
 
 PUBLIC = public_names()

@@ -30,8 +30,7 @@ def load_numerics() -> None:
     until the process ends anyway): 0.55 s of collections in a warm ``idtool fit``,
     0.2 s with them frozen. Only there, and once: frozen objects that later become
     cyclic garbage are never collected, which a process of one command can afford and
-    a Python session calling :func:`~idtool._cli._main.main` (tests, notebooks) cannot;
-    the idtool server freezes between its commands (:mod:`idtool._cli._server`)."""
+    a Python session calling :func:`~idtool._cli._main.main` (tests, notebooks) cannot."""
     global freeze_on_load
     import gc
 

@@ -1,6 +1,6 @@
-"""JAX's on-disk compilation cache for the command line: its settings (which the idtool
-server's client also reads, :mod:`idtool._cli._client`) and switching it on. Imports
-nothing heavy: it runs before every command."""
+"""JAX's on-disk compilation cache for the command line: its settings and switching it
+on (with it, the fit's traced programs are kept beside it: :mod:`idtool._fit._compiled`).
+Imports nothing heavy: it runs before every command."""
 
 from __future__ import annotations
 

@@ -10,6 +10,7 @@ from pathlib import Path
 from idtool._atomic import refuse_existing
 from idtool._cli._args import number_list
 from idtool._errors import IdtoolError
+from idtool._fit._folder import FIT_JSON
 
 __all__ = ["register"]
 
@@ -38,7 +39,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.draws < 10:
         raise IdtoolError(f"--draws {args.draws}: give at least 10")
     for folder in args.fits:
-        if not (Path(folder) / "fit.json").is_file():
+        if not (Path(folder) / FIT_JSON.name).is_file():
             raise IdtoolError(f"{folder}: not a fit folder (no fit.json); run 'idtool fit' first")
     out = Path(args.out) if args.out else default_out(args.fits)
     refuse_existing(out, args.force)

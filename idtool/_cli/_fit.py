@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -44,7 +45,7 @@ def _run(args: argparse.Namespace) -> int:
     )
     fit.save(args.out, force=args.force, command=args.argv)
     if args.json:  # fit.json as written, for scripts (the report is in report.txt)
-        print((Path(args.out) / "fit.json").read_text())
+        print(json.dumps(fit.to_json(), indent=1))
         return 0
     print(fit.report())
     print(

@@ -15,7 +15,6 @@ from collections.abc import Sequence
 
 from idtool._cli import _args
 from idtool._cli._cache import enable_compilation_cache
-from idtool._cli._client import ServerGone, forward
 from idtool._errors import IdtoolError
 from idtool._version import __version__
 
@@ -44,7 +43,6 @@ _COMMANDS = (
     "_report",
     "_compare",
     "_demo",
-    "_server",
 )
 
 
@@ -101,19 +99,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def console() -> int:
-    """Entry point of the ``idtool`` console script: the command runs in this
-    installation's idtool server if one is running and free (``idtool server start``;
-    :mod:`idtool._cli._client`), else in this interpreter (:func:`main`)."""
-    argv = sys.argv[1:]
-    try:
-        code = forward(argv)
-    except ServerGone as err:
-        print(f"idtool: {err}", file=sys.stderr)
-        return 1
-    if code is not None:
-        return code
-    _args.freeze_on_load = True  # a process of one command (load_numerics)
-    return main(argv)
+    """Entry point of the ``idtool`` console script: one command in this interpreter
+    (:func:`main`), whose numerical core's imports are then exempt from the garbage
+    collector (:func:`idtool._cli._args.load_numerics`)."""
+    _args.freeze_on_load = True  # a process of one command
+    return main(sys.argv[1:])
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ import idtool
 from idtool._cli._args import load_numerics, registry_names
 from idtool._cli._main import EXIT_INTERRUPTED, EXIT_NOT_CONVERGED
 from idtool._errors import IdtoolError
+from idtool._fit._folder import SAMPLE_JSON
 from idtool._posterior._runner import MAX_MINUTES, MAX_STEPS
 
 __all__ = ["register"]
@@ -56,7 +57,7 @@ def _run(args: argparse.Namespace) -> int:
     report = fit.save_posterior(command=args.argv)
     assert fit.posterior is not None  # save_posterior refuses otherwise
     if args.json:
-        print((folder / "sample.json").read_text())
+        print((folder / SAMPLE_JSON.name).read_text())
     else:
         print(report)
         print(

@@ -9,10 +9,11 @@ from pathlib import Path
 import idtool
 from idtool._atomic import refuse_existing, write_text_atomic
 from idtool._cli._args import load_numerics
+from idtool._fit._folder import VALIDATION_JSON
 
 __all__ = ["VALIDATION_FILE", "register"]
 
-VALIDATION_FILE = "validation.json"
+VALIDATION_FILE = VALIDATION_JSON.name
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -23,19 +23,22 @@ from idtool._errors import Problem
 
 __all__ = [
     "DATASET_SCHEMA",
+    "FIT_SCHEMA",
     "SIMULATOR_PARAMS_SCHEMA",
     "TRACE_TABLE_SCHEMA",
     "closest_name",
     "json_path",
     "load_schema",
     "schema_problems",
+    "schema_validator",
     "trace_columns",
 ]
 
 DATASET_SCHEMA = "dataset.schema.json"
 TRACE_TABLE_SCHEMA = "trace_table.schema.json"
 SIMULATOR_PARAMS_SCHEMA = "simulator_params.schema.json"
-_ALL = (DATASET_SCHEMA, TRACE_TABLE_SCHEMA, SIMULATOR_PARAMS_SCHEMA)
+FIT_SCHEMA = "fit.schema.json"  # fit.json (idtool._fit._folder.FIT_JSON)
+_ALL = (DATASET_SCHEMA, TRACE_TABLE_SCHEMA, SIMULATOR_PARAMS_SCHEMA, FIT_SCHEMA)
 
 
 def _schema_text(name: str) -> str:
@@ -63,7 +66,8 @@ def _registry() -> referencing.Registry:
 
 
 @functools.cache
-def _validator(name: str) -> jsonschema.Draft202012Validator:
+def schema_validator(name: str) -> jsonschema.Draft202012Validator:
+    """The validator of the schema file ``name``, its references resolved."""
     return jsonschema.Draft202012Validator(load_schema(name), registry=_registry())
 
 
@@ -151,7 +155,7 @@ def schema_problems(document: object, schema_name: str, file: str) -> list[Probl
     """
     problems = []
     done_required: set[tuple[str | int, ...]] = set()
-    for error in sorted(_validator(schema_name).iter_errors(document), key=_sort_key):
+    for error in sorted(schema_validator(schema_name).iter_errors(document), key=_sort_key):
         where = tuple(error.absolute_path)
         if error.validator == "required":
             if where in done_required:

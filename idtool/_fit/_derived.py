@@ -21,7 +21,9 @@ def derived_estimates(r: FitResult) -> dict[str, tuple[Estimate, str]]:
     model = r.model
     a_max = model.data.max_amplitude_m
     z = jnp.asarray(r.z)
-    described = model.coupling_of(model.values(z)).derived(a_max)
+    # the values in NumPy: in JAX, op by op, they compiled ~20 one-operation programs in
+    # every process, for the kinematic laws too (which derive nothing)
+    described = model.coupling_of(model.values(np.asarray(r.z, float))).derived(a_max)
     out: dict[str, tuple[Estimate, str]] = {}
     for name, (value, unit, what) in described.items():
 

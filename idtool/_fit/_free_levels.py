@@ -25,6 +25,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
+from idtool._fit._compiled import program
 from idtool._fit._program import run_lm, u_normal_equations
 from idtool._model._benchmodel import BenchModel
 
@@ -118,11 +119,18 @@ def free_levels(model: BenchModel, z: np.ndarray, phi: float) -> FreeLevels:
     z = np.asarray(z, float)
     free, u = _free_step(model, z, phi)
     if model.noise.autoregressive:
-        e = np.asarray(model.level_residuals(jnp.asarray(u), jnp.asarray(z), 0.0))
+        e = np.asarray(_level_residuals(model, jnp.asarray(u), jnp.asarray(z), 0.0))
         own = model.noise.estimate_phi(e, np.asarray(model.data.first))
         if abs(own - phi) >= PHI_SETTLED:
             free, _ = _free_step(model, z, own)
     return free
+
+
+@program()
+def _level_residuals(model: BenchModel, u, z, phi):
+    """:meth:`BenchModel.level_residuals` as one program: run op by op it compiled (or
+    loaded from the cache) ~100 one-operation programs, ~0.4 s of a warm fit."""
+    return model.level_residuals(u, z, phi)
 
 
 def _free_step(model: BenchModel, z: np.ndarray, phi: float) -> tuple[FreeLevels, np.ndarray]:

@@ -8,7 +8,6 @@ a concern of the solver's, not of the model (:mod:`idtool._model._benchmodel`).
 
 from __future__ import annotations
 
-import functools
 import math
 
 import equinox as eqx
@@ -19,6 +18,7 @@ from jaxtyping import Array, Float
 
 from idtool._data._blocks import FitData, padded_size
 from idtool._fit._arrow import Arrow, DenseNormal
+from idtool._fit._compiled import program
 from idtool._fit._lm import (
     ColouredJacobian,
     LMResult,
@@ -129,7 +129,7 @@ def u_normal_equations(
     return jtj, jtr
 
 
-@functools.partial(jax.jit, compiler_options=_COMPILE)
+@program(compiler_options=_COMPILE)
 def lm_program(
     model: BenchModel, structure: ColouredJacobian, z0, mask, phi, max_steps, tol
 ) -> LMResult:

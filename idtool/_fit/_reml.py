@@ -16,6 +16,7 @@ import numpy as np
 import optimistix as optx
 from jax.scipy.linalg import cho_solve
 
+from idtool._fit._compiled import program
 from idtool._model._xp import xp
 
 __all__ = ["GRID", "at_sds", "covariance", "evaluate", "fit_sds", "neg_log_lik"]
@@ -47,7 +48,7 @@ def neg_log_lik(tau2, r, g, v, kinds, zz, restricted):
     return 0.5 * (quad + logdet_c + jnp.where(restricted, logdet_a, 0.0)), step
 
 
-@jax.jit
+@program()
 def fit_sds(s0, free, r, g, v, kinds, zz):
     """REML log sds (optimistix BFGS); the sds outside ``free`` stay 0."""
 
@@ -60,7 +61,7 @@ def fit_sds(s0, free, r, g, v, kinds, zz):
     return sol.value
 
 
-@jax.jit
+@program()
 def evaluate(tau2_rows, r, g, v, kinds, zz, restricted):
     """-log (restricted) likelihood and theta's step at every row of ``tau2_rows``
     (rows, 3): one program for the profiles and the steps."""

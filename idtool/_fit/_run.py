@@ -423,7 +423,7 @@ def _compile_lm(data: FitData, names: tuple[str, str, str, str, str], noise: str
     actuator, offset, level)."""
     lw, cp, ac, of, lvl = names
     model = bench_model(data, lw, cp, noise, ac, of, settings, lvl)
-    lm_program.lower(*lm_arguments(model)).compile()
+    lm_program.compile_ahead(*lm_arguments(model))
 
 
 def check_settings(

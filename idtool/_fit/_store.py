@@ -1,133 +1,80 @@
-"""Reading a fit back from ``fits/NAME/``: the dataset it used, its model and its state.
+"""The fit folder on disk: :func:`write_artefact` writes a fit's own files (``fit.json``,
+``report.txt``, ``fit_state*.npz``, named in :mod:`idtool._fit._folder`) and
+:func:`load_artefact` reads them back into the :class:`~idtool._fit._artefact.FitArtefact`
+a fresh fit has, through the same constructor (:func:`~idtool._fit._artefact.fit_artefact`).
 
-``fit.json`` is for people and other tools; ``fit_state.npz`` keeps the exact internal
-parameter vector, its covariance and the AR(1) coefficient, so sampling and prediction
-start from the very point the fit found.
+``fit.json``'s ``schema_version`` is checked on reading: none (a fit.json written before
+the field) reads as version 1; a version newer than this idtool's is refused, naming the
+file and what to do.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from idtool._data._blocks import prepare_fit_data
-from idtool._data._dataset import Dataset, load_dataset
+from idtool._data._dataset import load_dataset
 from idtool._errors import IdtoolError
-from idtool._fit._discrepancy import Conditioning
-from idtool._fit._free_levels import FreeLevels
-from idtool._fit._level_design import discrepancy_conditioning
-from idtool._fit._result import Estimate, FitResult
-from idtool._model._benchmodel import BenchModel, bench_model
-from idtool._model._settings import ParameterSetting
+from idtool._fit._artefact import FitArtefact, fit_artefact
+from idtool._fit._folder import FIT_JSON, FIT_SCHEMA_VERSION, FIT_STATE, REPORT_TXT
 
-__all__ = ["STATE_FILE", "StoredFit", "law_state_file", "load_stored_fit", "save_fit_state"]
-
-STATE_FILE = "fit_state.npz"
+__all__ = ["load_artefact", "read_fit_doc", "read_states", "write_artefact"]
 
 
-def law_state_file(law: str) -> str:
-    """The state file of another coupling law's fit, kept for averaged predictions."""
-    return f"fit_state_{law}.npz"
+def read_fit_doc(folder: Path) -> dict[str, Any]:
+    """``fit.json`` of ``folder``, its schema version checked (none: version 1)."""
+    path = folder / FIT_JSON.name
+    if not path.is_file():
+        raise IdtoolError(f"{path}: not found; is {folder} the output of 'idtool fit'?")
+    try:
+        doc = json.loads(path.read_text())
+    except (ValueError, OSError) as err:
+        raise IdtoolError(f"{path}: unreadable fit ({err}); run 'idtool fit' again") from None
+    version = str(doc.get("schema_version", "1"))
+    if not version.isdigit() or int(version) > int(FIT_SCHEMA_VERSION):
+        raise IdtoolError(
+            f"{path}: schema version {version}, this idtool reads versions 1 to "
+            f"{FIT_SCHEMA_VERSION}; update idtool (or fit again with this one)"
+        )
+    return doc
 
 
-def save_fit_state(folder: Path, result: FitResult, name: str = STATE_FILE) -> None:
-    """Write ``fit_state.npz`` (internal vector, covariance, phi, parameter names), or
-    another law's state as ``name``."""
-    arrays: dict[str, np.ndarray] = {
-        "z": result.z,
-        "cov_z": result.cov_z,
-        "phi": np.array(result.phi),
-        "sigma_n": np.array(result.sigma_n),
-        "names": np.array(result.model.names),
-    }
-    # the levels model's sd grids (sd values, probabilities), one array per sd
-    arrays |= {f"sd_grid:{k}": np.stack(v) for k, v in result.sd_grids.items()}
-    if result.levels is not None:  # what the sampler's levels likelihood needs
-        free, sds = result.levels
-        arrays |= {f"sd_estimate:{k}": np.array(v) for k, v in sds.items()}
-        arrays |= {
-            "levels_off_n": free.off_n,
-            "levels_on_n": free.on_n,
-            "levels_measured": free.measured,
-            "levels_y": free.y,
-            "levels_cov_y": free.cov_y,
-            "levels_sigma_n": np.array(free.sigma_n),
-        }
-    np.savez(folder / name, **arrays)  # type: ignore[arg-type]  # numpy stubs: allow_pickle
+def write_artefact(folder: Path, artefact: FitArtefact) -> None:
+    """Write ``fit.json``, ``report.txt`` and the state files into ``folder``."""
+    (folder / FIT_JSON.name).write_text(json.dumps(artefact.doc, indent=1) + "\n")
+    (folder / REPORT_TXT.name).write_text(artefact.report_text + "\n")
+    for name, arrays in artefact.states.items():
+        np.savez(folder / name, **arrays)  # type: ignore[arg-type]  # numpy stubs: allow_pickle
 
 
-@dataclasses.dataclass(frozen=True)
-class StoredFit:
-    """A fit read back: its document, dataset, model, and internal state."""
-
-    folder: Path
-    doc: dict
-    dataset: Dataset
-    model: BenchModel
-    z: np.ndarray
-    cov_z: np.ndarray
-    phi: float
-    sigma_n: float
-    # the levels model's sds: name -> (sd values, posterior probabilities); empty when off
-    sd_grids: dict[str, tuple[np.ndarray, np.ndarray]] = dataclasses.field(default_factory=dict)
-    # the free levels and the sds (estimate, ci95 lo, hi), or None when off
-    levels: tuple[FreeLevels, dict[str, tuple[float, float, float]]] | None = None
-    # other coupling laws' fits kept for averaged predictions: law -> (BIC weight, fit)
-    alternates: dict[str, tuple[float, StoredFit]] = dataclasses.field(default_factory=dict)
-
-    @property
-    def conditioning(self) -> Conditioning | None:
-        """What predictions condition the discrepancy on, or None when the levels model
-        is off (:mod:`idtool._fit._discrepancy`)."""
-        if self.levels is None:
-            return None
-        return discrepancy_conditioning(self.model, self.levels[0])
-
-    def estimates(self) -> dict[str, Estimate]:
-        """Every shared parameter's estimate as ``fit.json`` records it."""
-        entries = self.doc.get("parameters", {}) | self.doc.get("bench", {})
-        return {
-            name: Estimate(
-                name,
-                e["unit"],
-                float(e["estimate"]),
-                float(e["std_error"]),
-                (float(e["ci95"][0]), float(e["ci95"][1])),
-                bool(e.get("at_bound", False)),
-                bool(e.get("fixed", False)),
-                str(e.get("fixed_by", "fixed by the user" if e.get("fixed") else "")),
-                str(e.get("one_sided", "")),
-            )
-            for name, e in entries.items()
-        }
-
-    @property
-    def optima(self) -> list[dict]:
-        """The multi-start's optima from ``fit.json``: ``rss`` and the physical block of
-        the internal vector ``z`` (entries that do not read back are skipped)."""
-        specs = self.model.shared_params[: self.model.n_physical]
-        out = []
-        for o in self.doc.get("multistart", []):
-            try:
-                z = np.array([s.internal(o[s.name]) for s in specs])
-                out.append({"rss": float(o["rss"]), "z": z})
-            except (KeyError, TypeError, ValueError):
-                continue
-        return out
-
-
-def load_stored_fit(folder: str | Path) -> StoredFit:
-    """Read ``fits/NAME``; the dataset must still be where the fit found it, unchanged."""
-    folder = Path(folder)
-    doc_path, state_path = folder / "fit.json", folder / STATE_FILE
-    for path in (doc_path, state_path):
+def read_states(folder: Path, doc: Mapping[str, Any]) -> dict[str, dict[str, np.ndarray]]:
+    """The state arrays of ``folder``'s fit: ``fit_state.npz`` and each kept law's."""
+    names = [FIT_STATE.name] + [
+        w["state_file"] for w in doc.get("coupling_laws", []) if "state_file" in w
+    ]
+    states = {}
+    for name in names:
+        path = folder / name
         if not path.is_file():
             raise IdtoolError(f"{path}: not found; is {folder} the output of 'idtool fit'?")
+        with np.load(path) as npz:
+            states[name] = {key: np.asarray(npz[key]) for key in npz.files}
+    return states
+
+
+def load_artefact(folder: str | Path) -> FitArtefact:
+    """Read the fit folder ``folder``; the dataset must still be where the fit found it,
+    unchanged (its sha256 is checked)."""
+    folder = Path(folder)
+    doc = read_fit_doc(folder)
+    doc_path = folder / FIT_JSON.name
     try:
-        doc = json.loads(doc_path.read_text())
         ds_info = doc["dataset"]
         noise = doc["noise"]
         mains_hz = float(noise["mains_hz"])
@@ -136,8 +83,9 @@ def load_stored_fit(folder: str | Path) -> StoredFit:
         periods = int(noise.get("periods_requested", round(float(noise["block_s"]) * mains_hz)))
         periods_used = int(noise.get("periods_per_block", periods))
         source = str(noise.get("mains_source", "argument"))
-    except (ValueError, KeyError, OSError) as err:
-        raise IdtoolError(f"{folder}: unreadable fit ({err}); run 'idtool fit' again") from None
+    except (ValueError, KeyError, TypeError) as err:
+        raise IdtoolError(f"{doc_path}: unreadable fit ({err}); run 'idtool fit' again") from None
+    states = read_states(folder, doc)
     # A dataset saved with the fit (it lived in memory only) is recorded relative to it.
     dataset = load_dataset(folder / ds_info["path"])
     if dataset.sha256 != ds_info["sha256"]:
@@ -157,66 +105,6 @@ def load_stored_fit(folder: str | Path) -> StoredFit:
             f"{doc_path}: the fit averaged over blocks of {periods_used} mains periods, this "
             f"idtool makes blocks of {data.periods_per_block} whole periods; run 'idtool fit' again"
         )
-    settings = tuple(ParameterSetting.from_dict(s) for s in doc.get("parameter_settings", []))
-
-    def stored(
-        coupling: str, actuator: str, offset: str, level: str, path: Path, alternates
-    ) -> StoredFit:
-        noise = doc["noise"].get("name", "ar1")
-        model = bench_model(data, doc["law"], coupling, noise, actuator, offset, settings, level)
-        state = np.load(path)
-        if tuple(state["names"]) != model.names:
-            raise IdtoolError(f"{path}: parameters do not match the model; fit again")
-        return StoredFit(
-            folder=folder,
-            doc=doc,
-            dataset=dataset,
-            model=model,
-            z=np.asarray(state["z"]),
-            cov_z=np.asarray(state["cov_z"]),
-            phi=float(state["phi"]),
-            sigma_n=float(state["sigma_n"]),
-            sd_grids={
-                key.split(":", 1)[1]: (state[key][0], state[key][1])
-                for key in state.files
-                if key.startswith("sd_grid:")
-            },
-            levels=_stored_levels(state),
-            alternates=alternates,
-        )
-
-    alternates = {}
-    for w in doc.get("coupling_laws", []):  # law/coupling/actuator/offset[/level] in "key"
-        if "state_file" in w:
-            _, coupling, actuator, offset, *rest = w["key"].split("/")
-            level = rest[0] if rest else "steady"  # keys before the level models: 4 parts
-            alt = stored(coupling, actuator, offset, level, folder / w["state_file"], {})
-            alternates[w["law"]] = (float(w["bic_weight"]), alt)
-    return stored(
-        doc["coupling"],
-        doc.get("actuator", {}).get("name", "slope"),  # fits before the lag model: slope
-        doc.get("offset", {}).get("name", "constant"),  # before the drift model: constant
-        doc.get("level", {}).get("name", "steady"),  # before the level models: steady
-        state_path,
-        alternates,
-    )
-
-
-def _stored_levels(state) -> tuple[FreeLevels, dict[str, tuple[float, float, float]]] | None:
-    """The levels model's state from ``fit_state.npz`` (None for a noise-only fit)."""
-    if "levels_y" not in state.files:
-        return None
-    free = FreeLevels(
-        off_n=state["levels_off_n"],
-        on_n=state["levels_on_n"],
-        measured=state["levels_measured"].astype(bool),
-        y=state["levels_y"],
-        cov_y=state["levels_cov_y"],
-        sigma_n=float(state["levels_sigma_n"]),
-    )
-    sds = {
-        key.split(":", 1)[1]: (float(state[key][0]), float(state[key][1]), float(state[key][2]))
-        for key in state.files
-        if key.startswith("sd_estimate:")
-    }
-    return free, sds
+    report_path = folder / REPORT_TXT.name
+    report = report_path.read_text() if report_path.is_file() else ""
+    return fit_artefact(doc, report, dataset, data, states)

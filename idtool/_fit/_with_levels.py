@@ -27,8 +27,8 @@ def compile_variability(result: FitResult) -> None:
     n, k = free.y.size, result.model.n_physical
     r, g = np.zeros(n), np.zeros((n, k))
     args = (np.eye(n), np.zeros((n, 2)), np.zeros((n, n)))
-    fit_sds.lower(np.zeros(3), np.zeros(3), r, g, *args).compile()
-    evaluate.lower(np.zeros((GRID, 3)), r, g, *args, True).compile()
+    fit_sds.compile_ahead(np.zeros(3), np.zeros(3), r, g, *args)
+    evaluate.compile_ahead(np.zeros((GRID, 3)), r, g, *args, True)
 
 
 def with_variability(result: FitResult) -> FitResult:

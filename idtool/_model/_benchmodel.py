@@ -371,8 +371,10 @@ def bench_model(
     nuisance_centre = np.stack([centres.get(g, np.zeros(n)) for g, _, _ in groups_of_trace])
     return BenchModel(
         data=data,
-        nuisance_centre=jnp.asarray(nuisance_centre),
-        start_z=jnp.asarray(start_z),
+        # device_put, not jnp.asarray: the same float64 arrays without compiling a
+        # conversion program per shape in every process
+        nuisance_centre=jax.device_put(nuisance_centre),
+        start_z=jax.device_put(start_z),
         law=law_cls,
         coupling=coupling_cls,
         actuator=actuator_cls,

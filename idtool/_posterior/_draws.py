@@ -1,7 +1,9 @@
-"""A posterior's draws for predictions (:class:`~idtool._predict._predict.Draws`): from a
-chain in memory (:class:`~idtool._posterior._record.PosteriorRecord`), from
-``posterior.nc`` read back, or for a stored fit whichever it has (its covariance's
-without a posterior), averaged over the coupling laws it kept.
+"""A fit's draws for predictions (:class:`~idtool._predict._predict.Draws`), one path for
+every consumer (``Fit.draws``, ``Fit.predict``, ``amplitude_for``, ``validate``, the
+report, ``compare``, ``Posterior.predict``): :func:`fit_draws`, the chosen law's draws
+from its posterior (a chain in memory, :class:`~idtool._posterior._record.PosteriorRecord`,
+or ``posterior.nc`` read back) when there is one, else Gaussian on the fit's covariance,
+averaged over the coupling laws the fit kept.
 
 The prediction stage (:mod:`idtool._predict`) turns any draws into friction ratios and
 knows nothing of chains; the posterior stage, above it, hands it its chain here.
@@ -11,15 +13,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from idtool._fit._artefact import FitArtefact
 from idtool._fit._discrepancy import Conditioning
-from idtool._fit._store import StoredFit
 from idtool._model._benchmodel import BenchModel
 from idtool._posterior._record import PosteriorRecord
 from idtool._posterior._store import POSTERIOR_FILE, PosteriorDraws, load_posterior
-from idtool._predict._mixture import average_over_laws, chosen_law_weight
+from idtool._predict._mixture import average_over_laws
 from idtool._predict._predict import Draws, SdGrids, chain_draws, draws_from_covariance
 
-__all__ = ["draws_from_posterior", "draws_from_stored", "prediction_draws"]
+__all__ = ["draws_from_posterior", "draws_from_stored", "fit_draws", "stored_posterior"]
 
 
 def draws_from_posterior(
@@ -58,17 +60,29 @@ def draws_from_stored(
     )
 
 
-def prediction_draws(fit: StoredFit, max_draws: int = 2000, seed: int = 0) -> Draws:
-    """Draws of a stored fit: its posterior's (``posterior.nc`` beside it), else
-    Gaussian on its covariance; averaged over the coupling laws it kept."""
-    path = Path(fit.folder) / POSTERIOR_FILE
-    cond = fit.conditioning
-    if path.is_file():
-        stored = load_posterior(path)
-        primary = draws_from_stored(stored, fit.model, max_draws, fit.sd_grids, seed, cond)
+def stored_posterior(folder: Path) -> PosteriorDraws | None:
+    """``posterior.nc`` of the fit folder ``folder`` read back, or None without one."""
+    path = Path(folder) / POSTERIOR_FILE
+    return load_posterior(path) if path.is_file() else None
+
+
+def fit_draws(
+    fit: FitArtefact,
+    posterior: PosteriorRecord | PosteriorDraws | None = None,
+    max_draws: int = 2000,
+    seed: int = 0,
+) -> Draws:
+    """Draws of ``fit``'s physical parameters: the posterior's (in memory or read back)
+    if given, else Gaussian on the chosen fit's covariance; averaged over the coupling
+    laws the fit kept by their BIC weights (:mod:`idtool._predict._mixture`)."""
+    chosen = fit.chosen
+    grids, cond = chosen.sd_grids, chosen.conditioning
+    if isinstance(posterior, PosteriorRecord):
+        primary = draws_from_posterior(posterior, chosen.model, max_draws, grids, seed, cond)
+    elif posterior is not None:
+        primary = draws_from_stored(posterior, chosen.model, max_draws, grids, seed, cond)
     else:
         primary = draws_from_covariance(
-            fit.model, fit.z, fit.cov_z, max_draws, seed, fit.sd_grids, cond
+            chosen.model, chosen.z, chosen.cov_z, max_draws, seed, grids, cond
         )
-    weight = chosen_law_weight(fit.doc, fit.model.coupling.name)
-    return average_over_laws(primary, weight, fit.alternates, seed)
+    return average_over_laws(primary, fit.chosen_weight, fit.alternates, seed)

@@ -25,7 +25,7 @@ LEVELS = "levels"  # the 'noise' of a chain sampled on the levels model
 
 
 class FitLike(Protocol):
-    """What sampling needs from a fit (``FitResult`` and ``StoredFit`` both have it)."""
+    """What sampling needs from a fit (``FitResult``, ``LawFit`` and ``idtool.Fit`` have it)."""
 
     @property
     def model(self) -> BenchModel: ...

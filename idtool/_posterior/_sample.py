@@ -34,6 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from idtool._errors import IdtoolError
+from idtool._fit._folder import CHAIN_H5
 from idtool._fit._variability import SD_PARAMS
 from idtool._model._benchmodel import BenchModel
 from idtool._model._noise import NOISE_MODELS
@@ -63,7 +64,7 @@ from idtool._posterior._start import find_start, initial_walkers
 
 __all__ = ["CHAIN_FILE", "LogPosterior", "sample_posterior"]
 
-CHAIN_FILE = "chain.h5"
+CHAIN_FILE = CHAIN_H5.name
 
 
 @jax.jit
@@ -165,7 +166,7 @@ def _resolve(fit, noise, priors, stored: dict | None):
     table |= _setting_priors(fit.model, params)  # the fit's parameter table, then --priors
     table |= overrides
     if stored is not None:
-        stored_table = parse_priors(stored["priors"], params, "chain.h5")
+        stored_table = parse_priors(stored["priors"], params, CHAIN_FILE)
         if priors and stored_table != table:
             raise IdtoolError(
                 "the priors differ from those the chain was sampled with; "
@@ -192,7 +193,7 @@ def sample_posterior(
     """Sample the posterior of ``fit``'s shared parameters (module docstring).
 
     Args:
-        fit: a :class:`~idtool._fit._result.FitResult` or a stored fit (``idtool._fit._store``).
+        fit: what sampling needs of a fit (:class:`~idtool._posterior._record.FitLike`).
         walkers: ensemble size (default 32).
         steps: total chain length (a resumed chain is continued up to ``steps``); ``None``
             (the default) samples until the chain has converged

@@ -29,6 +29,7 @@ import optimistix as optx
 
 from idtool._diagnostic import Diagnostic
 from idtool._errors import IdtoolError
+from idtool._fit._folder import FIT_JSON
 from idtool._model._noise import whiten
 from idtool._posterior._likelihood import (
     Target,
@@ -176,7 +177,7 @@ def find_start(fit: Any, target: Target, rebuild: Callable[[np.ndarray], Target]
                 f"the fit stopped in a local optimum: from its {best_label} the "
                 f"log-posterior rises {best_lp - fit_lp:.1f} higher ({names}); the walkers "
                 "start there. Redo the fit (other --seed or more --starts) before trusting "
-                "fit.json",
+                f"{FIT_JSON.name}",
                 log_posterior_rise=float(best_lp - fit_lp),
             )
         )

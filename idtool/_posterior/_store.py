@@ -28,6 +28,7 @@ import numpy as np
 from idtool._atomic import atomic_file
 from idtool._diagnostic import records
 from idtool._errors import IdtoolError
+from idtool._fit._folder import POSTERIOR_NC
 from idtool._posterior._diagnostics import import_arviz
 from idtool._posterior._groups import thinned_steps
 from idtool._posterior._record import PosteriorRecord
@@ -41,7 +42,7 @@ __all__ = [
     "write_posterior",
 ]
 
-POSTERIOR_FILE = "posterior.nc"
+POSTERIOR_FILE = POSTERIOR_NC.name
 
 
 def inference_data(

@@ -37,7 +37,6 @@ from idtool._predict._predict import (
 __all__ = [
     "DISAGREE_WEIGHT",
     "average_over_laws",
-    "chosen_law_weight",
     "law_disagreement_notes",
     "law_medians",
 ]
@@ -121,10 +120,3 @@ def law_medians(rows: Sequence[Prediction]) -> dict[str, np.ndarray]:
     """Each law's median mean FR over ``rows`` (empty without averaging)."""
     laws = [law for law, _ in rows[0].by_law] if rows else []
     return {law: np.array([dict(p.by_law)[law] for p in rows]) for law in laws}
-
-
-def chosen_law_weight(doc: Mapping[str, Any], law: str) -> float:
-    """The chosen law's BIC weight in ``fit.json`` (1 when it lists no laws)."""
-    return next(
-        (float(w["bic_weight"]) for w in doc.get("coupling_laws", []) if w["law"] == law), 1.0
-    )

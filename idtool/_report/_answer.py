@@ -23,7 +23,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from idtool._diagnostic import reworded
-from idtool._fit._store import StoredFit
+from idtool._fit._artefact import FitArtefact
+from idtool._fit._summary import TraceFit
 from idtool._predict._amplitude import AmplitudeFor
 from idtool._predict._predict import Draws
 from idtool._predict._tables import amplitude_table, predict_table
@@ -45,15 +46,15 @@ def _band(lo: float, hi: float, fmt: str) -> str:
     return f"[{lo:{fmt}}, {hi:{fmt}}]"
 
 
-def _measured(doc: dict, load: float, amp: float, speed: float) -> tuple[int, str]:
+def _measured(traces: Sequence[TraceFit], load: float, amp: float, speed: float) -> tuple[int, str]:
     """Traces run at this operating point, and the mean of their own friction ratios
     (with the range over traces when several)."""
     own = [
-        t.get("free_friction_ratio", {}).get("estimate")
-        for t in doc["traces"]
-        if math.isclose(t["normal_load_n"], load)
-        and math.isclose(t["amplitude_fraction"], amp)
-        and math.isclose(t["pull_speed_m_s"], speed)
+        t.free_friction_ratio
+        for t in traces
+        if math.isclose(t.normal_load_n, load)
+        and math.isclose(t.amplitude_fraction, amp)
+        and math.isclose(t.pull_speed_m_s, speed)
     ]
     values = [v for v in own if v is not None]
     if not own:
@@ -83,7 +84,7 @@ def _amplitude_cell(a: AmplitudeFor, max_amplitude_um: float, tested: tuple[floa
 
 
 def answer(
-    fit: StoredFit,
+    fit: FitArtefact,
     draws: Draws,
     targets: Sequence[float],
     loads_n: Sequence[float] = (),
@@ -92,7 +93,6 @@ def answer(
     operating points and the amplitude for each of ``targets`` [% reduction] at the
     tested loads plus ``loads_n`` [N]."""
     data = fit.model.data
-    doc = fit.doc
     loads = sorted(set(np.asarray(data.normal_load_n).tolist()))
     amps = sorted(a for a in set(np.asarray(data.amplitude_fraction).tolist()) if a > 0)
     speeds = sorted(set(np.asarray(data.pull_speed_m_s).tolist()))
@@ -106,7 +106,9 @@ def answer(
     for p in preds:
         red, (rlo, rhi) = p.reduction_percent
         _, (nlo, nhi) = p.new_trace or (p.median, p.ci95)
-        n_traces, measured = _measured(doc, p.normal_load_n, p.amplitude_fraction, p.pull_speed_m_s)
+        n_traces, measured = _measured(
+            fit.summary.traces, p.normal_load_n, p.amplitude_fraction, p.pull_speed_m_s
+        )
         amp = f"{100 * p.amplitude_fraction:.0f}% ({p.amplitude_fraction * max_um:.0f} um)"
         row: list[object] = [f"{p.normal_load_n:g}", amp]
         row += [f"{p.pull_speed_m_s * 1e3:g}"] if len(speeds) > 1 else []

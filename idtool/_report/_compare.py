@@ -25,6 +25,7 @@ import numpy as np
 from idtool._atomic import atomic_output_dir
 from idtool._diagnostic import BANNER_CODES, banner_label, reworded, with_code
 from idtool._errors import IdtoolError
+from idtool._fit._folder import FIT_JSON
 from idtool._posterior._store import POSTERIOR_FILE
 from idtool._predict._amplitude import AmplitudeFor
 from idtool._predict._compare import (
@@ -256,9 +257,9 @@ def _compare_one(
 def _fit_bytes(fit: FitToCompare) -> list[bytes]:
     """What identifies a fit's answers: its ``fit.json`` and ``posterior.nc``."""
     if fit.folder is None:
-        return [json.dumps(fit.to_json(), sort_keys=True).encode()]
+        return [json.dumps(fit.artefact.doc, sort_keys=True).encode()]
     return [
         (fit.folder / name).read_bytes()
-        for name in ("fit.json", POSTERIOR_FILE)
+        for name in (FIT_JSON.name, POSTERIOR_FILE)
         if (fit.folder / name).is_file()
     ]

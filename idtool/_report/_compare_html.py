@@ -174,7 +174,7 @@ def _header(c: ComparisonRecord) -> str:
 
 def compare_html(c: ComparisonRecord, figures: Sequence[Path]) -> str:
     """The page of ``c`` with the figures ``figures`` (FR against amplitude, load)."""
-    docs = {f.label: f.fit.to_json() for f in c.fits}  # fit.json (built, if in memory)
+    prov = {f.label: f.fit.artefact.summary.provenance for f in c.fits}
     sec = {
         SECTIONS[0]: f'<div class="answer">{_answer(c)}</div>',
         SECTIONS[1]: _amplitudes(c),
@@ -195,8 +195,8 @@ def compare_html(c: ComparisonRecord, figures: Sequence[Path]) -> str:
             {
                 **{
                     f.label: {
-                        "fit command": docs[f.label].get("command", "-"),
-                        "fit created": docs[f.label].get("created_utc", "-"),
+                        "fit command": prov[f.label].command,
+                        "fit created": prov[f.label].created_utc,
                         "draws": f.draws.note,
                     }
                     for f in c.fits

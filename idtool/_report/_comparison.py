@@ -9,13 +9,14 @@ imports the other's module to know the record.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 
 from idtool._data._dataset import Dataset
+from idtool._fit._artefact import FitArtefact
 from idtool._fit._result import Estimate
 from idtool._model._benchmodel import BenchModel
 from idtool._predict._amplitude import AmplitudeFor
@@ -55,8 +56,9 @@ class FitToCompare(Protocol):
     def estimates(self) -> Mapping[str, Estimate]: ...
     @property
     def warnings(self) -> list[str]: ...
+    @property
+    def artefact(self) -> FitArtefact: ...
     def draws(self, max_draws: int = 2000, seed: int = 0) -> Draws: ...
-    def to_json(self, command: Sequence[str] | None = None) -> dict: ...
 
 
 def prob(p: float, se: float | None = None, pm: str = "\u00b1") -> str:

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
+from idtool._fit._summary import TraceFit
 from idtool._plotting import MAX_WIDTH_IN, save_figure, subplots
 from idtool._predict._amplitude import amplitude_for_reduction
 from idtool._predict._mixture import law_medians
@@ -97,17 +99,17 @@ def walker_figure(
 
 
 def friction_ratio_figures(
-    draws: Draws, points: list[dict], speed_m_s: float, out: Path
+    draws: Draws, points: Sequence[TraceFit], speed_m_s: float, out: Path
 ) -> tuple[Path, Path]:
     """FR against amplitude (per load) and against load (per amplitude): the median, the
     95% band of the mean FR (dark) and of the next pull (light, scatter added); over
-    them each trace's own friction ratio (``fit.json`` traces: ``free_friction_ratio``,
+    them each trace's own friction ratio (:meth:`~idtool._fit._summary.TraceFit.own`:
     estimated from that trace alone, with its 95% interval from its own noise), or the
     model's per-trace FR when the levels model is off. The tested range of the x axis
     (the dataset's amplitudes, or loads) is shaded grey: outside it the curves are the
     model's extrapolation."""
-    loads = sorted({p["normal_load_n"] for p in points})
-    alphas = sorted({p["amplitude_fraction"] for p in points})
+    loads = sorted({p.normal_load_n for p in points})
+    alphas = sorted({p.amplitude_fraction for p in points})
     amp_grid = np.linspace(0.05, 1.0, 16)
     load_grid = np.linspace(0.5 * min(loads), 1.5 * max(loads), 16)
 
@@ -119,17 +121,12 @@ def friction_ratio_figures(
         new_lo, new_hi = (np.array([n[1][j] for n in new]) for j in (0, 1))
         return med, lo, hi, new_lo, new_hi, law_medians(preds)
 
-    def own(p):  # the trace's own FR and its 95% half-width, or None
-        free = p.get("free_friction_ratio")
-        if free is None:  # a noise-only fit: the model's FR at the trace
-            return p["friction_ratio"]["estimate"], 1.96 * p["friction_ratio"]["std_error"]
-        if not free["measured"]:
-            return None
-        return free["estimate"], 1.96 * free["std_error"]
-
     def marks(ax, key, value, x_key):
-        sel = [(p[x_key], own(p)) for p in points if p[key] == value]
-        sel = [(x, o) for x, o in sel if o is not None]
+        sel = [
+            (getattr(p, x_key), o)
+            for p in points
+            if getattr(p, key) == value and (o := p.own()) is not None
+        ]
         if sel:
             ax.errorbar(
                 [x for x, _ in sel],

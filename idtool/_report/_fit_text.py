@@ -8,11 +8,11 @@ import numpy as np
 
 from idtool._diagnostic import records
 from idtool._fit._derived import derived_estimates
+from idtool._fit._folder import FIT_SCHEMA_VERSION, RESIDUALS_PNG, TRACES_PNG, law_state_file
 from idtool._fit._plateau_drift import MIN_RELATIVE_CHANGE, P_ALARM
 from idtool._fit._program import prediction_at
 from idtool._fit._result import Estimate, FitResult
 from idtool._fit._run import FitRun
-from idtool._fit._store import law_state_file
 from idtool._plotting import MAX_WIDTH_IN, save_figure, subplots
 from idtool._provenance import provenance
 from idtool._version import __version__
@@ -85,6 +85,7 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
     prov = provenance(argv)
     law, coupling = r.model.law.name, r.model.coupling.name
     return {
+        "schema_version": FIT_SCHEMA_VERSION,  # datasets_schema/fit.schema.json
         "parameters": params,
         # quantities that follow from the parameters (the sdof law's drive force)
         "derived": {
@@ -395,7 +396,7 @@ def plot_fit(run: FitRun, out_dir: str | Path) -> list[Path]:
     fig.legend(handles, labels, loc="upper center", ncol=3, fontsize=9, frameon=False)
     fig.supxlabel("time [s]", fontsize=10)
     fig.supylabel("force [N] (block means)", fontsize=10)
-    paths = [out / "traces.png"]
+    paths = [out / TRACES_PNG.name]
     save_figure(fig, paths[-1], tight=False)
 
     fig, (a1, a2, a3) = subplots(1, 3, figsize=(MAX_WIDTH_IN, 3.6))
@@ -421,7 +422,7 @@ def plot_fit(run: FitRun, out_dir: str | Path) -> list[Path]:
         ylabel="density [-]",
         title="whitened vs N(0, 1)",
     )
-    paths.append(save_figure(fig, out / "residuals.png", tight=False))
+    paths.append(save_figure(fig, out / RESIDUALS_PNG.name, tight=False))
 
     if run.profiles:
         n = len(run.profiles)

@@ -20,9 +20,12 @@ import numpy as np
 from idtool._atomic import atomic_output_dir, write_text_atomic
 from idtool._diagnostic import BANNER_CODES, banner_label, from_records, with_code
 from idtool._errors import IdtoolError
-from idtool._fit._store import load_stored_fit
+from idtool._fit._artefact import FitArtefact
+from idtool._fit._folder import FIT_JSON, PPC_PNG, REPORT_HTML, REPORT_MD, RESIDUALS_PNG, TRACES_PNG
+from idtool._fit._store import load_artefact
+from idtool._fit._summary import VariabilitySummary
 from idtool._posterior._diagnostics import STOP_REASONS, import_arviz
-from idtool._posterior._draws import prediction_draws
+from idtool._posterior._draws import fit_draws, stored_posterior
 from idtool._posterior._store import POSTERIOR_FILE
 from idtool._report._answer import answer
 from idtool._report._figures import (
@@ -67,26 +70,19 @@ SECTIONS = (
 TARGETS = (30.0, 50.0)
 
 
-def _variability_table(doc: dict) -> str:
-    """The levels model's sds and lack-of-fit test (``fit.json`` ``variability``)."""
-    var = doc.get("variability", {"on": False})
-    if not var.get("on"):
+def _variability_table(var: VariabilitySummary | None) -> str:
+    """The levels model's sds and lack-of-fit test."""
+    if var is None:
         return "<p>Scatter and discrepancy: off (noise-only intervals).</p>"
     rows = [
-        [
-            name,
-            f"{100 * v['estimate']:.2f}%",
-            f"[{100 * v['ci95'][0]:.2f}%, {100 * v['ci95'][1]:.2f}%]",
-        ]
-        for name, v in var["sds"].items()
+        [name, f"{100 * est:.2f}%", f"[{100 * lo:.2f}%, {100 * hi:.2f}%]"]
+        for name, (est, lo, hi) in var.sds.items()
     ]
-    lof = var["lack_of_fit"]
     return (
         "<p>Pull-to-pull scatter and model discrepancy (relative sds, REML; 95% from "
         "each sd's REML likelihood times a prior that gives 'zero' probability 1/2). "
-        f"Lack of fit of the physical model: chi2 = {lof['chi2']:.1f} "
-        f"on {lof['dof']} dof, p = {lof['p_value']:.3g}.</p>"
-        + table(["sd", "estimate", "95%"], rows)
+        f"Lack of fit of the physical model: chi2 = {var.chi2:.1f} "
+        f"on {var.dof} dof, p = {var.p_value:.3g}.</p>" + table(["sd", "estimate", "95%"], rows)
     )
 
 
@@ -99,7 +95,7 @@ def _posterior(folder: Path):
     return idata.posterior, json.loads(idata.posterior.attrs["idtool"])
 
 
-def _banners(doc: dict, meta: dict | None, extrapolation: Sequence[str] = ()) -> str:
+def _banners(fit: FitArtefact, meta: dict | None, extrapolation: Sequence[str] = ()) -> str:
     """Verdicts that must be seen before anything else: a posterior chain that has not
     converged (its columns, bands and plots are not to be trusted yet), a physical
     model that misses the data by more than their noise explains, and answers that
@@ -120,7 +116,7 @@ def _banners(doc: dict, meta: dict | None, extrapolation: Sequence[str] = ()) ->
             "bands and plots below are not to be trusted yet. Continue it with idtool sample "
             "FIT --resume, then report again."
         )
-    fit_records = from_records(doc.get("diagnostic_records", []))
+    fit_records = [*fit.warnings, *fit.notes]
     out += [f"{banner_label(w)}: {w}" for w in with_code(fit_records, *BANNER_CODES)]
     out += [
         f"Extrapolated answer: {n.removesuffix(': extrapolation')}"
@@ -156,10 +152,10 @@ def _unasked_note(extrapolation: Sequence[str]) -> str:
     )
 
 
-def _header(fit, meta: dict | None, rid: str) -> str:
+def _header(fit: FitArtefact, meta: dict | None, rid: str) -> str:
     """What a qualification file needs to know first: the material and data, when the
     fit and this report were made, the report id, and the lab's own ``x_*`` fields."""
-    ds = fit.dataset
+    ds, prov = fit.dataset, fit.summary.provenance
     if meta is None:
         posterior = "none (bands from the fit's covariance)"
     else:
@@ -171,16 +167,16 @@ def _header(fit, meta: dict | None, rid: str) -> str:
         ["material", ds.material],
         ["dataset", f"{ds.name}: {len(ds.traces)} traces; sha256 {ds.sha256}"],
         ["description", ds.description or "-"],
-        ["fit", f"{fit.doc.get('created_utc', '-')}; {fit.doc['command']}"],
+        ["fit", f"{prov.created_utc}; {prov.command}"],
         ["model", _model_line(fit)],
         ["posterior", posterior],
-        ["report", f"{rid}, {now_utc()}, idtool {fit.doc['idtool_version']}"],
+        ["report", f"{rid}, {now_utc()}, idtool {prov.idtool_version}"],
     ]
     rows += [[key, str(value)] for key, value in ds.extensions.items()]
     return table(None, rows, cls="meta")
 
 
-def _model_line(fit) -> str:
+def _model_line(fit: FitArtefact) -> str:
     """The chosen model in words, and the coupling laws predictions average over."""
     m = fit.model
     line = (
@@ -188,7 +184,7 @@ def _model_line(fit) -> str:
         f"{m.offset.name} load-cell offset, {m.level.name} levels"
     )
     if fit.alternates:
-        weights = {w["law"]: w["bic_weight"] for w in fit.doc.get("coupling_laws", [])}
+        weights = {law: w["bic_weight"] for law, w in fit.coupling_laws.items()}
         kept = [m.coupling.name, *fit.alternates]
         line += "; predictions averaged over the coupling laws by BIC weight: " + ", ".join(
             f"{law} {weights.get(law, 0.0):.2f}" for law in kept
@@ -197,7 +193,7 @@ def _model_line(fit) -> str:
 
 
 def _report_id(folder: Path, targets: Sequence[float], loads_n: Sequence[float]) -> str:
-    parts = [(folder / "fit.json").read_bytes()]
+    parts = [(folder / FIT_JSON.name).read_bytes()]
     if (folder / POSTERIOR_FILE).is_file():
         parts.append((folder / POSTERIOR_FILE).read_bytes())
     return report_id(*parts, options_bytes(targets=list(targets), loads_n=list(loads_n)))
@@ -232,12 +228,12 @@ def write_report(
             raise IdtoolError(f"loads_n: {load:g} N is not a positive load")
 
     folder = Path(fit_folder)
-    fit = load_stored_fit(folder)
-    doc = fit.doc
+    fit = load_artefact(folder)
+    summary, prov = fit.summary, fit.summary.provenance
     post, meta = _posterior(folder)
     # 400 draws put the 2.5% and 97.5% points within about 1% of their limits while
     # keeping the inverse (bisection per draw) quick.
-    draws = prediction_draws(fit, max_draws=400)
+    draws = fit_draws(fit, stored_posterior(folder), max_draws=400)
     names = list(fit.model.physical_names)
     speed = float(np.median(fit.model.data.pull_speed_m_s))
     rid = _report_id(folder, targets, loads_n)
@@ -270,18 +266,19 @@ def write_report(
         )
         rows = []
         meaning = {q.name: q.description for q in fit.model.declared_params}
-        fixed = [n for n, p in doc["parameters"].items() if p.get("fixed")]
+        physical = {q.name for q in fit.model.declared_params if q.physical}
+        fixed = [n for n, e in fit.estimates.items() if e.fixed and n in physical]
         for n in [*names, *fixed]:
-            p = doc["parameters"][n]
-            row = [n, meaning.get(n, ""), p["unit"], g(p["estimate"])]
-            ci = f"[{g(p['ci95'][0])}, {g(p['ci95'][1])}]"
-            if p.get("one_sided") == "lower":  # the data bound it from below only
-                ci = f"> {g(p['ci95'][0])} (not bounded above)"
-            elif p.get("one_sided") == "upper":
-                ci = f"< {g(p['ci95'][1])} (not bounded below)"
+            e = fit.estimates[n]
+            row = [n, meaning.get(n, ""), e.unit, g(e.estimate)]
+            ci = f"[{g(e.ci95[0])}, {g(e.ci95[1])}]"
+            if e.one_sided == "lower":  # the data bound it from below only
+                ci = f"> {g(e.ci95[0])} (not bounded above)"
+            elif e.one_sided == "upper":
+                ci = f"< {g(e.ci95[1])} (not bounded below)"
             row += [ci]
             if n in fixed:
-                row[-1:] = [p.get("fixed_by", "fixed by the user"), "-", "fixed (not sampled)"]
+                row[-1:] = [e.fixed_label or "fixed by the user", "-", "fixed (not sampled)"]
             elif post is not None and n in post:
                 v = np.asarray(post[n].values).ravel()
                 lo, med, hi = np.percentile(v, [2.5, 50, 97.5])
@@ -289,11 +286,9 @@ def write_report(
             else:
                 row += ["-", "no posterior: run idtool sample"]
             rows.append(row)
-        for n, p in doc.get("derived", {}).items():  # e.g. the sdof law's drive force
-            ci = f"[{g(p['ci95'][0])}, {g(p['ci95'][1])}]"
-            rows.append(
-                [n, p["description"], p["unit"], g(p["estimate"]), ci, "-", "derived from the fit"]
-            )
+        for n, (e, what) in summary.derived.items():  # e.g. the sdof law's drive force
+            ci = f"[{g(e.ci95[0])}, {g(e.ci95[1])}]"
+            rows.append([n, what, e.unit, g(e.estimate), ci, "-", "derived from the fit"])
         sec["Estimates"] = table(
             ["parameter", "meaning", "unit", "fit", "fit 95%", "posterior median", "posterior 95%"],
             rows,
@@ -301,9 +296,8 @@ def write_report(
         md += ["| parameter | fit | 95% | posterior 95% |", "|---|---|---|---|"]
         md += [f"| {r[0]} [{r[2]}] | {r[3]} | {r[4]} | {r[6]} |" for r in rows]
 
-        corr = doc["correlation"]
         cpath = correlation_figure(
-            corr["names"], np.array(corr["matrix"]), figs / "correlation.png"
+            list(summary.correlation_names), summary.correlation, figs / "correlation.png"
         )
         sec["Correlations"] = img(cpath, "correlation matrix")
 
@@ -312,21 +306,21 @@ def write_report(
         sec["Traces and posterior predictive check"] = (
             "<p>Measured block means (grey) against the fitted traces (red), with the 95% "
             "band of the load cell's noise around the fit.</p>"
-            + img(folder / "traces.png", "measured and fitted traces")
+            + img(folder / TRACES_PNG.name, "measured and fitted traces")
             + (
-                img(folder / "ppc.png", "posterior predictive check")
-                if (folder / "ppc.png").is_file()
+                img(folder / PPC_PNG.name, "posterior predictive check")
+                if (folder / PPC_PNG.name).is_file()
                 else "<p>No posterior predictive check yet (run idtool sample).</p>"
             )
         )
-        sec["Residuals"] = img(folder / "residuals.png", "residuals and autocorrelation")
+        sec["Residuals"] = img(folder / RESIDUALS_PNG.name, "residuals and autocorrelation")
 
         corner_src = (
             {n: np.asarray(post[n].values).ravel() for n in names}
             if post is not None
             else draws.values
         )
-        units = {n: doc["parameters"][n]["unit"] for n in names}
+        units = {n: fit.estimates[n].unit for n in names}
         kpath = corner_figure(corner_src, names, units, figs / "corner.png")
         sec["Posterior: corner plot"] = f"<p>Draws: {html.escape(draws.note)}</p>" + img(
             kpath, "corner plot"
@@ -342,7 +336,7 @@ def write_report(
         else:
             sec["Sampling: walkers and convergence"] = "<p>No posterior: run idtool sample.</p>"
 
-        p1, p2 = friction_ratio_figures(draws, doc["traces"], speed, figs)
+        p1, p2 = friction_ratio_figures(draws, summary.traces, speed, figs)
         sec["Friction ratio against amplitude and load"] = (
             f"<p>Median and 95% bands ({html.escape(draws.note)}). Dark band: the mean "
             "friction ratio at that operating point (use it for design curves); light "
@@ -350,7 +344,7 @@ def write_report(
             "it for acceptance limits). Points: each trace's own friction ratio, fitted "
             "from that trace alone, with its 95% interval from its own noise (traces whose "
             "ON window ends before the force settles measure none).</p>"
-            + _variability_table(doc)
+            + _variability_table(summary.variability)
             + img(p1, "FR against amplitude")
             + img(p2, "FR against load")
         )
@@ -365,49 +359,43 @@ def write_report(
         )
 
         sec["Held-out validation"] = validation_section(folder)
-        sec["Model comparison"] = f"<p>{html.escape(doc['choice'])}</p>" + table(
+        sec["Model comparison"] = f"<p>{html.escape(summary.choice)}</p>" + table(
             ["model", "AIC", "BIC", "log L", "parameters"],
             [
-                [
-                    m["model"],
-                    f"{m['aic']:.1f}",
-                    f"{m['bic']:.1f}",
-                    f"{m['loglik']:.1f}",
-                    m["n_params"],
-                ]
-                for m in doc["model_comparison"]
+                [m.model, f"{m.aic:.1f}", f"{m.bic:.1f}", f"{m.loglik:.1f}", m.n_params]
+                for m in summary.model_comparison
             ],
         )
-        warnings = list(doc["warnings"]) + ([] if meta is None else meta.get("warnings", []))
+        warnings = list(fit.warnings) + ([] if meta is None else meta.get("warnings", []))
         sec["Warnings"] = (
             "<ul>" + "".join(f"<li>{html.escape(w)}</li>" for w in warnings) + "</ul>"
             if warnings
             else "<p>none</p>"
         )
-        if doc.get("notes"):  # facts of the design, not doubts: below the warnings
+        if fit.notes:  # facts of the design, not doubts: below the warnings
             sec["Warnings"] += (
                 "<h3>Notes</h3><ul>"
-                + "".join(f"<li>{html.escape(n)}</li>" for n in doc["notes"])
+                + "".join(f"<li>{html.escape(n)}</li>" for n in fit.notes)
                 + "</ul>"
             )
-        prov = {
-            "dataset": doc["dataset"],
-            "fit command": doc["command"],
-            "fit seed": doc["seed"],
-            "versions": doc["versions"],
-            "idtool": doc["idtool_version"],
+        record = {
+            "dataset": prov.dataset,
+            "fit command": prov.command,
+            "fit seed": prov.seed,
+            "versions": prov.versions,
+            "idtool": prov.idtool_version,
             "sampling": None
             if meta is None
             else {k: meta.get(k) for k in ("seed", "noise", "timing")},
         }
-        sec["Provenance"] = kv_table(prov)
+        sec["Provenance"] = kv_table(record)
         sec["Sign-off"] = signoff()
-        md += ["", f"Dataset sha256 {ds.sha256}; fit command `{doc['command']}`"]
+        md += ["", f"Dataset sha256 {ds.sha256}; fit command `{prov.command}`"]
 
     title = f"idtool report: {fit.dataset.name}"
     extrapolation = first.extrapolation if asked else []
-    banners = _banners(doc, meta, extrapolation) + validation_banner(folder)
+    banners = _banners(fit, meta, extrapolation) + validation_banner(folder)
     document = page(title, _header(fit, meta, rid), banners, {n: sec[n] for n in SECTIONS})
-    out = write_text_atomic(folder / "report.html", document)
-    write_text_atomic(folder / "report.md", "\n".join(md) + "\n")
+    out = write_text_atomic(folder / REPORT_HTML.name, document)
+    write_text_atomic(folder / REPORT_MD.name, "\n".join(md) + "\n")
     return out

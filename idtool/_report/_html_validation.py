@@ -8,6 +8,7 @@ import html
 import json
 from pathlib import Path
 
+from idtool._fit._folder import VALIDATION_JSON
 from idtool._report._page import g, table
 
 __all__ = ["validation_banner", "validation_section"]
@@ -16,7 +17,7 @@ __all__ = ["validation_banner", "validation_section"]
 def validation_banner(folder: Path) -> str:
     """A banner when held-out traces fall outside their 95% bands more often than
     chance explains: fewer inside than the 2.5% quantile of Binomial(n, 0.95)."""
-    path = folder / "validation.json"
+    path = folder / VALIDATION_JSON.name
     if not path.is_file():
         return ""
     v = json.loads(path.read_text())
@@ -37,7 +38,7 @@ def validation_banner(folder: Path) -> str:
 
 def validation_section(folder: Path) -> str:
     """``validation.json`` (``idtool validate-fit``) as a table, or what to run."""
-    path = folder / "validation.json"
+    path = folder / VALIDATION_JSON.name
     if not path.is_file():
         return (
             "<p>No held-out validation yet: fit some traces (idtool fit --traces) and run "

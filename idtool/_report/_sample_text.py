@@ -12,6 +12,7 @@ import numpy as np
 
 from idtool._atomic import write_text_atomic
 from idtool._diagnostic import records
+from idtool._fit._folder import CHAIN_H5, POSTERIOR_NC, PPC_PNG, REPORT_SAMPLE_TXT, SAMPLE_JSON
 from idtool._fit._result import Estimate
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._plotting import MAX_WIDTH_IN, save_figure, subplots
@@ -31,7 +32,9 @@ from idtool._version import __version__
 
 __all__ = ["POSTERIOR_FILES", "sample_report", "write_posterior_outputs"]
 
-POSTERIOR_FILES = ("chain.h5", "posterior.nc", "sample.json", "report_sample.txt", "ppc.png")
+POSTERIOR_FILES = tuple(
+    f.name for f in (CHAIN_H5, POSTERIOR_NC, SAMPLE_JSON, REPORT_SAMPLE_TXT, PPC_PNG)
+)
 
 
 def _fmt(x: float) -> str:
@@ -159,13 +162,13 @@ def write_posterior_outputs(
     }
     groups, steps = model_check_groups(post, target)
     extra = {"fit_folder": str(folder)}
-    write_posterior(post, folder / "posterior.nc", extra, groups, steps)
-    write_text_atomic(folder / "sample.json", json.dumps(doc, indent=1) + "\n")
-    write_text_atomic(folder / "report_sample.txt", report + "\n")
+    write_posterior(post, folder / POSTERIOR_NC.name, extra, groups, steps)
+    write_text_atomic(folder / SAMPLE_JSON.name, json.dumps(doc, indent=1) + "\n")
+    write_text_atomic(folder / REPORT_SAMPLE_TXT.name, report + "\n")
     if isinstance(check, LevelsCheck):
-        plot_levels_check(check, fit.levels[0], model, folder / "ppc.png")
+        plot_levels_check(check, fit.levels[0], model, folder / PPC_PNG.name)
     else:
-        plot_predictive(check, model.data.trace_ids, folder / "ppc.png")
+        plot_predictive(check, model.data.trace_ids, folder / PPC_PNG.name)
     return report
 
 

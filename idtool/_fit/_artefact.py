@@ -1,0 +1,327 @@
+"""The fit artefact: one typed record of a fit, the same whether it was just made or read
+back from its folder.
+
+A fit is its ``fit.json`` document, its text report and the internal state of each
+coupling law it kept (``fit_state*.npz``: the optimum ``z`` on the internal scale, its
+covariance, the noise parameters, the levels model's state). :func:`fit_artefact` is the
+one constructor: a fresh fit passes the documents it is about to write (the document
+passed through JSON, so it holds exactly what the file will), a loaded fit the ones it
+read (:func:`idtool._fit._store.load_artefact`), so the two behave identically by
+construction. The record carries the model spec as a typed :class:`ModelSpec`, the
+estimates, covariance, noise, levels, alternates (the other coupling laws predictions
+average over, each a :class:`LawFit` with its BIC weight), the diagnostics and what the
+report shows (:class:`~idtool._fit._summary.FitSummary`).
+
+The folder's files are named in :mod:`idtool._fit._folder`; ``fit.json`` is described by
+``datasets_schema/fit.schema.json`` and carries its ``schema_version``: a fit.json
+without one (written before the field) reads as version 1, whose fields are a subset.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from idtool._data._blocks import FitData
+from idtool._data._dataset import Dataset
+from idtool._diagnostic import Diagnostic, from_records
+from idtool._errors import IdtoolError
+from idtool._fit._discrepancy import Conditioning
+from idtool._fit._folder import FIT_STATE
+from idtool._fit._free_levels import FreeLevels
+from idtool._fit._level_design import discrepancy_conditioning
+from idtool._fit._result import Estimate, FitResult
+from idtool._fit._summary import FitSummary, estimate_of_doc, fit_summary
+from idtool._model._benchmodel import BenchModel, bench_model
+from idtool._model._settings import ParameterSetting
+
+__all__ = [
+    "FitArtefact",
+    "LawFit",
+    "ModelSpec",
+    "fit_artefact",
+    "state_arrays",
+]
+
+SdGrids = dict[str, tuple[np.ndarray, np.ndarray]]
+Levels = tuple[FreeLevels, dict[str, tuple[float, float, float]]]
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelSpec:
+    """Which model a fit is, by registered name: friction law, coupling law, noise,
+    actuator, offset and level models, and the user's parameter settings."""
+
+    law: str
+    coupling: str
+    noise: str
+    actuator: str
+    offset: str
+    level: str
+    settings: tuple[ParameterSetting, ...] = ()
+
+    @property
+    def key(self) -> str:
+        """The candidate's name, ``law/coupling/actuator/offset[/level]`` (as in
+        ``fit.json``'s ``model_comparison`` and ``coupling_laws``)."""
+        key = f"{self.law}/{self.coupling}/{self.actuator}/{self.offset}"
+        return key if self.level == "steady" else f"{key}/{self.level}"
+
+    def build(self, data: FitData) -> BenchModel:
+        """The :class:`BenchModel` of ``data`` this spec names."""
+        return bench_model(
+            data,
+            self.law,
+            self.coupling,
+            self.noise,
+            self.actuator,
+            self.offset,
+            self.settings,
+            self.level,
+        )
+
+
+@dataclasses.dataclass(frozen=True)
+class LawFit:
+    """One coupling law's fit, what predictions and the sampler need of it: its model,
+    optimum ``z`` (internal scale, all parameters), covariance ``cov_z``, noise
+    parameters ``phi`` and ``sigma_n`` [N], and the levels model's sd grids (name ->
+    (sd values, posterior probabilities)) and state (free levels, sds), or none."""
+
+    spec: ModelSpec
+    model: BenchModel = dataclasses.field(repr=False)
+    z: np.ndarray
+    cov_z: np.ndarray = dataclasses.field(repr=False)
+    phi: float
+    sigma_n: float
+    sd_grids: SdGrids = dataclasses.field(default_factory=dict, repr=False)
+    levels: Levels | None = dataclasses.field(default=None, repr=False)
+
+    @property
+    def conditioning(self) -> Conditioning | None:
+        """What predictions condition the discrepancy on, or None when the levels model
+        is off (:mod:`idtool._fit._discrepancy`)."""
+        return None if self.levels is None else discrepancy_conditioning(self.model, self.levels[0])
+
+
+@dataclasses.dataclass(frozen=True)
+class FitArtefact:
+    """A fit, fresh or loaded (module docstring).
+
+    Attributes:
+        dataset: the fitted traces.
+        data: their block means (:class:`~idtool._data._blocks.FitData`).
+        chosen: the chosen model's :class:`LawFit`.
+        estimates: every parameter's :class:`~idtool.Estimate`, physical ones first.
+        optima: the multi-start's optima: ``rss`` [N^2] and the physical block of ``z``.
+        warnings: the fit's doubts (:class:`~idtool._diagnostic.Diagnostic`).
+        notes: what the data let the fit measure (facts, not doubts).
+        coupling_laws: each fitted coupling law's key, criteria and weights, best first.
+        alternates: the other coupling laws predictions average over: law -> (BIC
+            weight, its :class:`LawFit`).
+        summary: what it reports besides (traces, derived quantities, correlations,
+            model comparison, levels model, provenance:
+            :class:`~idtool._fit._summary.FitSummary`).
+        report_text: the printed fit report.
+        doc: the ``fit.json`` document, as written.
+        states: the state files' arrays by file name (:func:`state_arrays`).
+    """
+
+    dataset: Dataset = dataclasses.field(repr=False)
+    data: FitData = dataclasses.field(repr=False)
+    chosen: LawFit
+    estimates: dict[str, Estimate]
+    optima: tuple[dict[str, Any], ...]
+    warnings: tuple[str, ...]
+    notes: tuple[str, ...]
+    coupling_laws: dict[str, dict[str, Any]]
+    alternates: dict[str, tuple[float, LawFit]]
+    summary: FitSummary = dataclasses.field(repr=False)
+    report_text: str = dataclasses.field(repr=False)
+    doc: dict[str, Any] = dataclasses.field(repr=False)
+    states: dict[str, dict[str, np.ndarray]] = dataclasses.field(repr=False, default_factory=dict)
+
+    @property
+    def schema_version(self) -> str:
+        """The layout version of ``fit.json`` (:data:`~idtool._fit._folder.FIT_SCHEMA_VERSION`)."""
+        return str(self.doc.get("schema_version", "1"))
+
+    @property
+    def spec(self) -> ModelSpec:
+        return self.chosen.spec
+
+    @property
+    def model(self) -> BenchModel:
+        return self.chosen.model
+
+    @property
+    def chosen_weight(self) -> float:
+        """The chosen coupling law's BIC weight (1 when the fit lists no laws)."""
+        entry = self.coupling_laws.get(self.model.coupling.name)
+        return 1.0 if entry is None else float(entry["bic_weight"])
+
+
+def state_arrays(result: FitResult) -> dict[str, np.ndarray]:
+    """A fit's internal state as ``fit_state*.npz`` holds it: the vector ``z`` and its
+    covariance, ``phi``, ``sigma_n`` [N], the parameter names, the multi-start's optima
+    (``optima_rss`` [N^2], ``optima_z``: their physical blocks, internal scale) and the
+    levels model's sd grids and state."""
+    k = result.model.n_physical
+    arrays: dict[str, np.ndarray] = {
+        "z": np.asarray(result.z),
+        "cov_z": np.asarray(result.cov_z),
+        "phi": np.array(result.phi),
+        "sigma_n": np.array(result.sigma_n),
+        "names": np.array(result.model.names),
+        "optima_rss": np.array([float(o["rss"]) for o in result.optima], float),
+        "optima_z": np.array([np.asarray(o["z"], float)[:k] for o in result.optima]).reshape(
+            len(result.optima), k
+        ),
+    }
+    # the levels model's sd grids (sd values, probabilities), one array per sd
+    arrays |= {f"sd_grid:{k}": np.stack(v) for k, v in result.sd_grids.items()}
+    if result.levels is not None:  # what the sampler's levels likelihood needs
+        free, sds = result.levels
+        arrays |= {f"sd_estimate:{k}": np.array(v) for k, v in sds.items()}
+        arrays |= {
+            "levels_off_n": free.off_n,
+            "levels_on_n": free.on_n,
+            "levels_measured": free.measured,
+            "levels_y": free.y,
+            "levels_cov_y": free.cov_y,
+            "levels_sigma_n": np.array(free.sigma_n),
+        }
+    return arrays
+
+
+def _law_fit(spec: ModelSpec, data: FitData, state: Mapping[str, np.ndarray], where: str) -> LawFit:
+    """The :class:`LawFit` of ``spec`` from its state arrays (``where``: for errors)."""
+    model = spec.build(data)
+    if tuple(str(n) for n in state["names"]) != model.names:
+        raise IdtoolError(f"{where}: parameters do not match the model; fit again")
+    levels: Levels | None = None
+    if "levels_y" in state:
+        free = FreeLevels(
+            off_n=np.asarray(state["levels_off_n"]),
+            on_n=np.asarray(state["levels_on_n"]),
+            measured=np.asarray(state["levels_measured"]).astype(bool),
+            y=np.asarray(state["levels_y"]),
+            cov_y=np.asarray(state["levels_cov_y"]),
+            sigma_n=float(state["levels_sigma_n"]),
+        )
+        sds = {
+            key.split(":", 1)[1]: (float(v[0]), float(v[1]), float(v[2]))
+            for key, v in state.items()
+            if key.startswith("sd_estimate:")
+        }
+        levels = free, sds
+    return LawFit(
+        spec=spec,
+        model=model,
+        z=np.asarray(state["z"]),
+        cov_z=np.asarray(state["cov_z"]),
+        phi=float(state["phi"]),
+        sigma_n=float(state["sigma_n"]),
+        sd_grids={
+            key.split(":", 1)[1]: (np.asarray(v[0]), np.asarray(v[1]))
+            for key, v in state.items()
+            if key.startswith("sd_grid:")
+        },
+        levels=levels,
+    )
+
+
+def _estimates(doc: Mapping[str, Any]) -> dict[str, Estimate]:
+    """Every shared parameter's estimate as ``fit.json`` records it."""
+    entries = doc.get("parameters", {}) | doc.get("bench", {})
+    return {name: estimate_of_doc(name, e) for name, e in entries.items()}
+
+
+def _optima(doc: Mapping[str, Any], model: BenchModel, state: Mapping[str, np.ndarray]):
+    """The multi-start's optima (``rss``, physical block of ``z``): from the state file,
+    or (version 1) from ``fit.json``'s physical values (entries that do not read back
+    are skipped)."""
+    if "optima_rss" in state:
+        rss, zs = np.asarray(state["optima_rss"]), np.asarray(state["optima_z"])
+        return tuple({"rss": float(r), "z": np.array(z)} for r, z in zip(rss, zs, strict=True))
+    specs = model.shared_params[: model.n_physical]
+    out = []
+    for o in doc.get("multistart", []):
+        try:
+            z = np.array([s.internal(o[s.name]) for s in specs])
+            out.append({"rss": float(o["rss"]), "z": z})
+        except (KeyError, TypeError, ValueError):
+            continue
+    return tuple(out)
+
+
+def _sentences(doc: Mapping[str, Any], key: str) -> tuple[str, ...]:
+    """``warnings`` or ``notes``: from ``diagnostic_records`` (codes and values kept),
+    else the plain sentences of a fit written before them (and before notes: none)."""
+    if "diagnostic_records" in doc:
+        severity = "warning" if key == "warnings" else "note"
+        found: list[Diagnostic] = from_records(doc["diagnostic_records"])
+        return tuple(d for d in found if d.severity == severity)
+    return tuple(doc.get(key, []))
+
+
+def _spec(doc: Mapping[str, Any], coupling: str, key: str | None = None) -> ModelSpec:
+    """The model spec of ``fit.json``'s chosen model, or of another coupling law's from
+    its ``key`` (law/coupling/actuator/offset[/level])."""
+    settings = tuple(ParameterSetting.from_dict(s) for s in doc.get("parameter_settings", []))
+    noise = str(doc["noise"].get("name", "ar1"))
+    if key is not None:
+        _, coupling, actuator, offset, *rest = key.split("/")
+        level = rest[0] if rest else "steady"  # keys before the level models: 4 parts
+        return ModelSpec(doc["law"], coupling, noise, actuator, offset, level, settings)
+    return ModelSpec(
+        doc["law"],
+        coupling,
+        noise,
+        doc.get("actuator", {}).get("name", "slope"),  # fits before the lag model: slope
+        doc.get("offset", {}).get("name", "constant"),  # before the drift model: constant
+        doc.get("level", {}).get("name", "steady"),  # before the level models: steady
+        settings,
+    )
+
+
+def fit_artefact(
+    doc: Mapping[str, Any],
+    report_text: str,
+    dataset: Dataset,
+    data: FitData,
+    states: Mapping[str, Mapping[str, np.ndarray]],
+) -> FitArtefact:
+    """The artefact of a ``fit.json`` document, the report's text and the state arrays
+    by file name (``fit_state.npz`` and each kept law's); ``data``: the dataset's block
+    means as the fit made them. The one constructor, for fresh and loaded fits alike."""
+    written: dict[str, Any] = json.loads(json.dumps(doc))  # exactly what fit.json holds
+    doc = written
+    law_entries = doc.get("coupling_laws", [])
+    chosen_spec = _spec(doc, doc["coupling"])
+    chosen = _law_fit(chosen_spec, data, states[FIT_STATE.name], FIT_STATE.name)
+    alternates = {}
+    for w in law_entries:
+        if "state_file" in w:
+            spec = _spec(doc, w["law"], w["key"])
+            alt = _law_fit(spec, data, states[w["state_file"]], w["state_file"])
+            alternates[w["law"]] = (float(w["bic_weight"]), alt)
+    return FitArtefact(
+        dataset=dataset,
+        data=data,
+        chosen=chosen,
+        estimates=_estimates(doc),
+        optima=_optima(doc, chosen.model, states[FIT_STATE.name]),
+        warnings=_sentences(doc, "warnings"),
+        notes=_sentences(doc, "notes"),
+        coupling_laws={w["law"]: w for w in law_entries},
+        alternates=alternates,
+        summary=fit_summary(doc),
+        report_text=report_text.rstrip("\n"),
+        doc=written,
+        states={name: dict(arrays) for name, arrays in states.items()},
+    )
