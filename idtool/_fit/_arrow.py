@@ -22,6 +22,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from idtool._model._xp import xp
+
 __all__ = ["Arrow", "ArrowInverse", "DenseNormal", "arrow_pinv", "block_index"]
 
 
@@ -56,8 +58,9 @@ class Arrow(eqx.Module):
 
     @staticmethod
     def join(vs: Array, vb: Array) -> Float[Array, " p"]:
-        """Inverse of :meth:`split`."""
-        return jnp.concatenate([vs, vb.T.ravel()])
+        """Inverse of :meth:`split` (NumPy for NumPy blocks: no one-operation program
+        in the fit's summary)."""
+        return xp(vs, vb).concatenate([vs, vb.T.ravel()])
 
     @property
     def grad(self) -> Float[Array, " p"]:

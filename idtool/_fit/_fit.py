@@ -305,8 +305,9 @@ def _summarise(
     # (J^T J)^+ from the arrowhead blocks (O(p^2), not O(p^3)). A parameter the data do
     # not move at all (saturated at a bound) has a zero column and zero variance; the
     # bound warning below names it.
-    inverse, weakest, weakest_direction = inverse_and_weakest(best.normal)
-    jtr = np.asarray(best.jtr)
+    normal = jax.tree.map(np.asarray, best.normal)  # NumPy: no one-operation programs
+    inverse, weakest, weakest_direction = inverse_and_weakest(normal)
+    jtr = np.asarray(normal.grad)
     decrement = float(jtr @ inverse @ jtr)
     converged = bool(best.converged) or decrement < _DECREMENT_AT_OPTIMUM * rss / n
     cov = sigma2 * inverse
