@@ -104,7 +104,7 @@ def small_fit_folder(tmp_path_factory) -> Path:
 # again in the same process), and a worker keeps its compiled programs from one module
 # to the next (above), so the files that fit benches of the same shapes (the same
 # designs, the same models) are one unit: one worker compiles their programs once, and
-# the session's fitted benches (tests/bench_bank.py) are fitted once. The run ends when
+# the session's fitted benches (the bank, above) are fitted once. The run ends when
 # the slower worker does, so the units go heaviest first (longest processing time
 # first: the light ones fill in at the end). The files of SPLIT_BY_PARAMETER are split by
 # their parameter, each value a unit of its own: their tests share no fixture, and one
