@@ -77,7 +77,7 @@ def test_a_parameter_the_data_bound_on_one_side_is_stated_one_sided(tmp_path):
     rise, _ = refit_with_fixed(run, i, float(run.model.params[i].internal(p.ci95[0])))
     assert 3.84 / 1.2 < rise < 3.84 * 1.2
     # what fit.json records, and a loaded fit reads
-    fit.save(tmp_path / "fit", command=["fit"])
+    fit.save(tmp_path / "fit", command=["fit"], plots=False)
     doc = json.loads((tmp_path / "fit" / "fit.json").read_text())
     assert doc["parameters"]["power_load_n"]["one_sided"] == "lower"
     assert "one_sided" not in doc["parameters"]["mu"]

@@ -120,7 +120,7 @@ def test_every_trace_drift_rate_is_recovered(drifting_bench, drift_fit):
 
 
 def test_fit_json_records_the_offset_model(drift_fit, tmp_path):
-    drift_fit.save(tmp_path / "fit")
+    drift_fit.save(tmp_path / "fit", plots=False)
     back = idtool.load_fit(tmp_path / "fit")
     assert back.model.offset is DriftingOffset
     assert back.model.names == drift_fit.model.names

@@ -146,18 +146,31 @@ def test_a_default_sample_of_a_default_fit_converges(default_fit, tmp_path):
     assert read_chain(chain)[0].shape[0] == d.steps
 
 
-def test_the_command_line_samples_until_converged_and_records_the_rule(default_fit, tmp_path):
-    argv = ["sample", str(default_fit), "--seed", "2", "--no-progress", "-q", "--force"]
-    assert main(argv) == 0
-    doc = json.loads((default_fit / "sample.json").read_text())["diagnostics"]
+@pytest.fixture(scope="module")
+def sampled(default_fit, tmp_path_factory):
+    """``idtool sample`` until converged (seed 2) on a copy of the default fit, and its
+    exit code: read by the command-line test and the report test (one converged run of
+    the example on the command line, not two). Read-only: a test that writes copies it."""
+    folder = tmp_path_factory.mktemp("sampled") / "fit"
+    shutil.copytree(default_fit, folder)
+    code = main(["sample", str(folder), "--seed", "2", "--no-progress", "-q", "--force"])
+    return folder, code
+
+
+def test_the_command_line_samples_until_converged_and_records_the_rule(sampled, tmp_path):
+    folder, code = sampled
+    assert code == 0
+    doc = json.loads((folder / "sample.json").read_text())["diagnostics"]
     assert doc["converged"] and doc["stopped_by"] == "converged" and doc["rule"] == RULE
     assert all(p["ess_bulk"] >= 400 and p["rhat"] <= 1.01 for p in doc["parameters"].values())
-    text = (default_fit / "report_sample.txt").read_text()
+    text = (folder / "report_sample.txt").read_text()
     assert "stopped by: the convergence rule was met" in text
     # the bound, on the command line: exit 3 (written, not converged), and says which bound
-    argv = [*argv, "--max-steps", str(FIRST_CHECK)]
-    assert main(argv) == 3
-    sample = json.loads((default_fit / "sample.json").read_text())
+    bounded = tmp_path / "fit"
+    shutil.copytree(folder, bounded)
+    argv = ["sample", str(bounded), "--seed", "2", "--no-progress", "-q", "--force"]
+    assert main([*argv, "--max-steps", str(FIRST_CHECK)]) == 3
+    sample = json.loads((bounded / "sample.json").read_text())
     doc = sample["diagnostics"]
     assert not doc["converged"] and doc["stopped_by"] == "max_steps"
     # the verdict as a record, which the report's banner reads
@@ -165,13 +178,13 @@ def test_the_command_line_samples_until_converged_and_records_the_rule(default_f
     assert record["values"]["stopped_by"] == "max_steps" and record["values"]["steps"] == 400
 
 
-def test_the_examples_default_report_opens_without_a_red_banner(default_fit, tmp_path):
+def test_the_examples_default_report_opens_without_a_red_banner(sampled, tmp_path):
     """What ``make demo`` shows first: a converged posterior and no banner. The default
     targets (30%, 50%) need amplitudes below the tested 50-70% on the example: marked in
     the answer and noted under it; asked for, the same answer is a banner."""
     folder = tmp_path / "fit"
-    shutil.copytree(default_fit, folder)
-    assert main(["sample", str(folder), "--seed", "0", "--no-progress", "-q", "--force"]) == 0
+    shutil.copytree(sampled[0], folder)
+    assert sampled[1] == 0  # ``idtool sample``, until converged (the fixture)
     assert main(["report", str(folder)]) == 0
     page = (folder / "report.html").read_text()
     head = page.split('<section id="answer">')[0]

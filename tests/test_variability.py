@@ -111,7 +111,7 @@ def test_predictions_report_both_bands(example_fits):
 
 def test_saved_fit_keeps_the_levels_model(example_fits, tmp_path):
     on, _ = example_fits
-    out = on.save(tmp_path / "fit")
+    out = on.save(tmp_path / "fit", plots=False)
     back = idtool.load_fit(out)
     assert back.levels is not None
     free, sds = back.levels
