@@ -42,7 +42,7 @@ class TraceTruth:
             (None without ON).
         mains_phase_rad: phase of the hum.
         reaches_on_level: whether the force gets down to the ON level before OFF (lag
-            actuator: to within ``LAG_REACH_FRACTION`` of the ON-OFF depth).
+            actuator: to within ``idtool._model._actuator.REACH_FRACTION`` of the ON-OFF depth).
         friction_coefficient: this trace's mu [-], with scatter.
         operating_point_friction_ratio: FR of the operating point without scatter.
         offset_drift_n_s: this trace's offset drift rate [N/s]: the offset at time t is
@@ -127,8 +127,7 @@ class BenchTruth:
             "idtool_version": __version__,
             "dataset_sha256": self.dataset_sha256,
             "friction_law": contact.friction_law,
-            "friction_coefficient": contact.friction_coefficient,
-            "contact_stiffness_n_m": contact.contact_stiffness_n_m,
+            **contact.values(),  # mu and the law's own parameters, by their file names
             "coupling": self.params.to_dict()["coupling"],
             "coupling_in_fit": self.params.coupling.in_fit,
             "operating_points": [dataclasses.asdict(o) for o in self.operating_points],
