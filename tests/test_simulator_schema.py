@@ -7,6 +7,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import json
+import pickle
 from typing import ClassVar
 
 import jax.numpy as jnp
@@ -17,6 +18,7 @@ from idtool._data._schema import SIMULATOR_PARAMS_SCHEMA, _schema_text
 from idtool._errors import IdtoolError
 from idtool._model._coupling import COUPLINGS, GAIN, AbstractCoupling
 from idtool._model._params import Param
+from idtool._simulate import _records
 from idtool._simulate._departures import departure_params
 from idtool._simulate._params import BenchParams, load_bench_params
 from idtool._simulate._records import coupling_laws
@@ -120,3 +122,12 @@ def test_the_benches_are_those_simulated_before_the_registries(bench):
         params = _shrunk(departure_params(kind, 5))
     dataset, _ = simulate_bench(params, seed=7)
     assert dataset.sha256 == _BEFORE[bench]
+
+
+def test_a_record_pickles_and_is_found_by_name():
+    params = load_bench_params(example_params_path())
+    assert pickle.loads(pickle.dumps(params)) == params
+    # another process finds a record class by name before making it (module __getattr__)
+    assert _records.LuGreParams.part.__name__ == "LuGre"
+    with pytest.raises(AttributeError):
+        _records.NoSuchParams  # noqa: B018

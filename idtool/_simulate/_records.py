@@ -94,10 +94,6 @@ class CouplingParams(_PartParams):
         """The law; ``max_amplitude_m`` [m], the rig's horn amplitude at 100% command."""
         return self.part.from_truth(self.values(), max_amplitude_m)
 
-    def model(self, max_amplitude_m: float) -> AbstractCoupling:
-        """The law (:meth:`coupling`)."""
-        return self.coupling(max_amplitude_m)
-
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class ActuatorParams(_PartParams):
@@ -186,3 +182,18 @@ def _choose(parts: Mapping[str, type[Any]], name: str, kind: str) -> type[Any]:
         return parts[name]
     except KeyError:
         raise IdtoolError(f"unknown {kind} {name!r}: choose one of {', '.join(parts)}") from None
+
+
+def __getattr__(name: str) -> type[_PartParams]:
+    """A part's record by its class name (``DahlParams``), made on first use: how a
+    record pickled in one process is found in another (a worker of a study)."""
+    kinds = (
+        (ContactParams, friction_laws()),
+        (CouplingParams, coupling_laws()),
+        (ActuatorParams, actuator_models()),
+    )
+    for base, parts in kinds:
+        for part in parts.values():
+            if f"{part.__name__}Params" == name:
+                return _record(base, part)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
