@@ -15,13 +15,14 @@ import pytest
 
 from idtool._data._example import example_params_path
 from idtool._data._schema import SIMULATOR_PARAMS_SCHEMA, _schema_text
+from idtool._data._write import json_bytes
 from idtool._errors import IdtoolError
 from idtool._model._coupling import COUPLINGS, GAIN, AbstractCoupling
 from idtool._model._params import Param
 from idtool._simulate import _records
 from idtool._simulate._departures import departure_params
 from idtool._simulate._params import BenchParams, load_bench_params
-from idtool._simulate._records import coupling_laws
+from idtool._simulate._records import coupling_laws, friction_laws
 from idtool._simulate._schema import schema_text, simulator_params_schema
 from idtool._simulate._simulate import simulate_bench
 
@@ -131,3 +132,23 @@ def test_a_record_pickles_and_is_found_by_name():
     assert _records.LuGreParams.part.__name__ == "LuGre"
     with pytest.raises(AttributeError):
         _records.NoSuchParams  # noqa: B018
+
+
+def test_every_registered_friction_law_is_simulated():
+    values = {
+        "friction_coefficient": 0.3,
+        "contact_stiffness_n_m": 1e9,
+        "static_ratio": 1.3,
+        "stribeck_velocity_m_s": 0.01,
+    }
+    ratios = {}
+    for name, law in friction_laws().items():
+        p = _example()
+        p["contact"] = {"friction_law": name} | {f.name: values[f.name] for f in law.truth_fields()}
+        _, truth = simulate_bench(p, seed=1)
+        json_bytes(truth.to_dict())  # the truth file, a rigid law's Lambda as null
+        ratios[name] = truth.operating_points[0].friction_ratio
+        assert (truth.operating_points[0].dimensionless_stiffness is None) == (name == "coulomb")
+    # a static level above the kinetic one pulls the ON level up a little; the rigid
+    # law's vibration reduces more than the compliant one's
+    assert ratios["coulomb"] < ratios["dahl"] < ratios["lugre"] < 1.0

@@ -31,6 +31,7 @@ from collections.abc import Mapping
 from typing import ClassVar
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
@@ -134,7 +135,7 @@ class AbstractActuator(eqx.Module):
         depth of ``on_force_n`` [N] by the ON window's end (``timing``, [s]); read off
         :meth:`force_n` at the switch-off."""
         end = jnp.asarray([timing.on_end_s])
-        lowest = float(self.force_n(end, off_force_n, on_force_n, timing, 0.0)[0])
+        lowest = float(_force_n(self, end, off_force_n, on_force_n, timing)[0])
         return lowest - on_force_n <= REACH_FRACTION * (off_force_n - on_force_n)
 
 
@@ -242,6 +243,13 @@ class LagActuator(AbstractActuator):
         return (depth - tail) / self.slope_n_s + self.time_constant_s * x.log(
             x.maximum(tail / (SETTLED_FRACTION * depth), 1.0)
         )
+
+
+@jax.jit
+def _force_n(actuator, time_s, off_force_n, on_force_n, timing):
+    """:meth:`AbstractActuator.force_n` without offset, compiled once per model (op by
+    op, the lag's 40 operations took 7 ms a trace)."""
+    return actuator.force_n(time_s, off_force_n, on_force_n, timing, 0.0)
 
 
 def lag_step_n(

@@ -35,7 +35,8 @@ class TraceTruth:
             without the offset.
         slip_amplitude_m: effective slip amplitude a from the coupling [m].
         velocity_ratio: VR = v / (a w) (None without vibration).
-        dimensionless_stiffness: Lambda = Kt a / (mu N), at the nominal mu.
+        dimensionless_stiffness: Lambda = Kt a / (mu N), at the nominal mu (None for a
+            rigid law: Coulomb's Kt is infinite).
         load_cell_offset_n: this trace's offset at time 0 [N].
         startup_s: pull start [s].
         logged_on_s, horn_on_s: ON window of the logged flag and of the horn [s]
@@ -66,7 +67,7 @@ class TraceTruth:
     on_force_n: float
     slip_amplitude_m: float
     velocity_ratio: float | None
-    dimensionless_stiffness: float
+    dimensionless_stiffness: float | None
     load_cell_offset_n: float
     startup_s: float
     logged_on_s: tuple[float, float] | None
@@ -92,7 +93,7 @@ class OperatingPointTruth:
             curve a fit should recover.
         slip_amplitude_m: effective slip amplitude a [m].
         velocity_ratio: VR = v / (a w) (None without vibration).
-        dimensionless_stiffness: Lambda = Kt a / (mu N).
+        dimensionless_stiffness: Lambda = Kt a / (mu N) (None for a rigid law).
     """
 
     normal_load_n: float
@@ -101,7 +102,7 @@ class OperatingPointTruth:
     friction_ratio: float
     slip_amplitude_m: float
     velocity_ratio: float | None
-    dimensionless_stiffness: float
+    dimensionless_stiffness: float | None
 
 
 @dataclasses.dataclass(frozen=True)
