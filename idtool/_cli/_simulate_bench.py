@@ -28,8 +28,9 @@ def _run(args: argparse.Namespace) -> int:
     print(f"{'id':<18} {'FR':>6} {'Lambda':>7} {'VR':>6}  reaches ON level")
     for t in truth.traces:
         vr = "-" if t.velocity_ratio is None else f"{t.velocity_ratio:.3f}"
+        lam = "-" if t.dimensionless_stiffness is None else f"{t.dimensionless_stiffness:.2f}"
         print(
-            f"{t.id:<18} {t.friction_ratio:>6.3f} {t.dimensionless_stiffness:>7.2f} "
+            f"{t.id:<18} {t.friction_ratio:>6.3f} {lam:>7} "
             f"{vr:>6}  {'yes' if t.reaches_on_level else 'no'}"
         )
     if not params.coupling.in_fit:

@@ -147,15 +147,25 @@ def _sort_key(error: jsonschema.ValidationError) -> list[tuple[int, int, str]]:
     return [(0, p, "") if isinstance(p, int) else (1, 0, str(p)) for p in error.absolute_path]
 
 
-def schema_problems(document: object, schema_name: str, file: str) -> list[Problem]:
+def schema_problems(
+    document: object, schema_name: str | Mapping[str, Any], file: str
+) -> list[Problem]:
     """Every way ``document`` breaks the schema, as problems located by JSON field path.
+
+    ``schema_name`` is one of the ``*_SCHEMA`` files, or a schema itself (one made at run
+    time, its references resolved among the files).
 
     Amplitudes given in percent (a value in (1, 100] for a ``*fraction*`` field) get the
     hint "divide by 100".
     """
     problems = []
     done_required: set[tuple[str | int, ...]] = set()
-    for error in sorted(schema_validator(schema_name).iter_errors(document), key=_sort_key):
+    validator = (
+        schema_validator(schema_name)
+        if isinstance(schema_name, str)
+        else jsonschema.Draft202012Validator(schema_name, registry=_registry())
+    )
+    for error in sorted(validator.iter_errors(document), key=_sort_key):
         where = tuple(error.absolute_path)
         if error.validator == "required":
             if where in done_required:

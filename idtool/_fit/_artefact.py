@@ -36,8 +36,9 @@ from idtool._fit._free_levels import FreeLevels
 from idtool._fit._level_design import discrepancy_conditioning
 from idtool._fit._result import Estimate, FitResult
 from idtool._fit._summary import FitSummary, estimate_of_doc, fit_summary
-from idtool._model._benchmodel import BenchModel, bench_model
+from idtool._model._benchmodel import BenchModel
 from idtool._model._settings import ParameterSetting
+from idtool._model._spec import ModelSpec
 
 __all__ = [
     "FitArtefact",
@@ -49,40 +50,6 @@ __all__ = [
 
 SdGrids = dict[str, tuple[np.ndarray, np.ndarray]]
 Levels = tuple[FreeLevels, dict[str, tuple[float, float, float]]]
-
-
-@dataclasses.dataclass(frozen=True)
-class ModelSpec:
-    """Which model a fit is, by registered name: friction law, coupling law, noise,
-    actuator, offset and level models, and the user's parameter settings."""
-
-    law: str
-    coupling: str
-    noise: str
-    actuator: str
-    offset: str
-    level: str
-    settings: tuple[ParameterSetting, ...] = ()
-
-    @property
-    def key(self) -> str:
-        """The candidate's name, ``law/coupling/actuator/offset[/level]`` (as in
-        ``fit.json``'s ``model_comparison`` and ``coupling_laws``)."""
-        key = f"{self.law}/{self.coupling}/{self.actuator}/{self.offset}"
-        return key if self.level == "steady" else f"{key}/{self.level}"
-
-    def build(self, data: FitData) -> BenchModel:
-        """The :class:`BenchModel` of ``data`` this spec names."""
-        return bench_model(
-            data,
-            self.law,
-            self.coupling,
-            self.noise,
-            self.actuator,
-            self.offset,
-            self.settings,
-            self.level,
-        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -275,9 +242,7 @@ def _spec(doc: Mapping[str, Any], coupling: str, key: str | None = None) -> Mode
     settings = tuple(ParameterSetting.from_dict(s) for s in doc.get("parameter_settings", []))
     noise = str(doc["noise"].get("name", "ar1"))
     if key is not None:
-        _, coupling, actuator, offset, *rest = key.split("/")
-        level = rest[0] if rest else "steady"  # keys before the level models: 4 parts
-        return ModelSpec(doc["law"], coupling, noise, actuator, offset, level, settings)
+        return ModelSpec.from_key(key, noise, settings)
     return ModelSpec(
         doc["law"],
         coupling,

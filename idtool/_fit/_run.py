@@ -60,6 +60,7 @@ from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._offset import OFFSETS
 from idtool._model._params import Param
 from idtool._model._settings import ParameterSetting
+from idtool._model._spec import ModelSpec
 
 __all__ = [
     "FitRun",
@@ -100,10 +101,9 @@ MIN_LAW_WEIGHT = 1e-3
 
 
 def _key(law: str, coupling: str, actuator: str, offset: str, level: str) -> str:
-    """A candidate's name: ``law/coupling/actuator/offset``, then ``/level`` unless the
-    levels are steady (so keys stay what they were before the level models)."""
-    key = f"{law}/{coupling}/{actuator}/{offset}"
-    return key if level == "steady" else f"{key}/{level}"
+    """A candidate's name (:attr:`idtool._model._spec.ModelSpec.key`; the key does not
+    name the noise model)."""
+    return ModelSpec(law, coupling, DEFAULT_NOISE, actuator, offset, level).key
 
 
 def _better(multi: FitResult, nested: FitResult) -> FitResult:

@@ -31,12 +31,14 @@ from collections.abc import Mapping
 from typing import ClassVar
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from idtool._model._bench import TraceTiming, mean_force_n
 from idtool._model._names import DEFAULT_ACTUATOR
 from idtool._model._params import Param
+from idtool._model._truth_fields import TruthField
 from idtool._model._xp import xp
 from idtool._registry import Registry
 
@@ -44,6 +46,8 @@ __all__ = [
     "ACTUATORS",
     "CORNER_N",
     "DEFAULT_ACTUATOR",
+    "LAG_SETTLE_TIME_CONSTANTS",
+    "REACH_FRACTION",
     "SETTLED_FRACTION",
     "AbstractActuator",
     "LagActuator",
@@ -57,6 +61,12 @@ ACTUATORS: Registry[type[AbstractActuator]] = Registry("actuator model")
 CORNER_N = 0.5  # rounding of the slope model's corners [N]; fixed, not identifiable
 # A force counts as settled at its new level once within this fraction of the step.
 SETTLED_FRACTION = 0.01
+# The simulator's start-up of the lag counts as over once its exponential tail is down to
+# exp(-5) < 1% of where it started: the steady OFF sliding is measured from there.
+LAG_SETTLE_TIME_CONSTANTS = 5.0
+# The simulator's truth: a lagging force "reaches" the ON level when within this fraction
+# of the ON-OFF depth at the horn's switch-off.
+REACH_FRACTION = 0.02
 
 SLOPE = Param("slope_n_s", "N/s", "log", 1.0, 1e5, start=100.0, description="actuator slope")
 STARTUP_SLOPE = Param(
@@ -103,6 +113,31 @@ class AbstractActuator(eqx.Module):
         """Time [s] after a switch until the force is within :data:`SETTLED_FRACTION` of
         a step ``depth_n`` [N] deep (from rest at the old level)."""
 
+    @classmethod
+    def truth_fields(cls) -> tuple[TruthField, ...]:
+        """The model's numbers in the simulator's parameter file (beside the common
+        ``pull_start_s``): by default its ``fit_params``."""
+        return tuple(TruthField.of(p) for p in cls.fit_params)
+
+    @classmethod
+    def from_truth(cls, values: Mapping[str, float]) -> AbstractActuator:
+        """The model from the values of :meth:`truth_fields` by their file names."""
+        return cls.from_values(values)
+
+    @abc.abstractmethod
+    def startup_duration_s(self, off_force_n: float) -> float:
+        """Time [s] from the pull's start until the start-up towards ``off_force_n`` [N]
+        is over and the steady OFF sliding begins (the simulator plans its ON window
+        from there)."""
+
+    def reaches_level(self, off_force_n: float, on_force_n: float, timing: TraceTiming) -> bool:
+        """Whether the force gets down to within :data:`REACH_FRACTION` of the ON-OFF
+        depth of ``on_force_n`` [N] by the ON window's end (``timing``, [s]); read off
+        :meth:`force_n` at the switch-off."""
+        end = jnp.asarray([timing.on_end_s])
+        lowest = float(_force_n(self, end, off_force_n, on_force_n, timing)[0])
+        return lowest - on_force_n <= REACH_FRACTION * (off_force_n - on_force_n)
+
 
 @ACTUATORS.register("slope")
 class SlopeActuator(AbstractActuator):
@@ -110,10 +145,24 @@ class SlopeActuator(AbstractActuator):
 
     slope_n_s: Float[ArrayLike, "*b"]
     startup_slope_n_s: Float[ArrayLike, "*b"]
+    # the corners' rounding [N]: fixed in the fit, a truth field of the simulator
+    corner_n: float = eqx.field(static=True, default=CORNER_N)
 
     @classmethod
     def from_values(cls, values):
         return cls(values["slope_n_s"], values["startup_slope_n_s"])
+
+    @classmethod
+    def truth_fields(cls):
+        return (
+            TruthField.of(STARTUP_SLOPE),
+            TruthField.of(SLOPE),
+            TruthField("corner_n", "N", "width over which the model's corners are rounded"),
+        )
+
+    @classmethod
+    def from_truth(cls, values):
+        return cls(values["slope_n_s"], values["startup_slope_n_s"], values["corner_n"])
 
     def force_n(self, time_s, off_force_n, on_force_n, timing, offset_n):
         return mean_force_n(
@@ -124,11 +173,20 @@ class SlopeActuator(AbstractActuator):
             self.slope_n_s,
             self.startup_slope_n_s,
             offset_n,
-            CORNER_N,
+            self.corner_n,
         )
 
     def settle_time_s(self, depth_n):
         return (1.0 - SETTLED_FRACTION) * depth_n / self.slope_n_s
+
+    def startup_duration_s(self, off_force_n):
+        return float(off_force_n / self.startup_slope_n_s)
+
+    def reaches_level(self, off_force_n, on_force_n, timing):
+        """Whether the slope covers the whole depth within the ON window."""
+        return bool(
+            self.slope_n_s * (timing.on_end_s - timing.on_start_s) >= off_force_n - on_force_n
+        )
 
 
 @ACTUATORS.register("lag")
@@ -155,6 +213,28 @@ class LagActuator(AbstractActuator):
             self.time_constant_s,
         )
 
+    @classmethod
+    def truth_fields(cls):
+        """The time constant and one rate limit, for the start-up and the switchings."""
+        return (
+            TruthField.of(TIME_CONSTANT),
+            TruthField(
+                "rate_limit_n_s",
+                "N/s",
+                "largest rate of change of the force (flow-restricted pneumatics), for "
+                "the start-up as for the ON/OFF switchings",
+            ),
+        )
+
+    @classmethod
+    def from_truth(cls, values):
+        rate = values["rate_limit_n_s"]
+        return cls(rate, rate, values["time_constant_s"])
+
+    def startup_duration_s(self, off_force_n):
+        rate, tau = self.startup_slope_n_s, self.time_constant_s
+        return float(max(off_force_n - rate * tau, 0.0) / rate + LAG_SETTLE_TIME_CONSTANTS * tau)
+
     def settle_time_s(self, depth_n):
         x = xp(depth_n, self.slope_n_s, self.time_constant_s)  # NumPy on the host
         depth = x.asarray(depth_n)
@@ -163,6 +243,13 @@ class LagActuator(AbstractActuator):
         return (depth - tail) / self.slope_n_s + self.time_constant_s * x.log(
             x.maximum(tail / (SETTLED_FRACTION * depth), 1.0)
         )
+
+
+@jax.jit
+def _force_n(actuator, time_s, off_force_n, on_force_n, timing):
+    """:meth:`AbstractActuator.force_n` without offset, compiled once per model (op by
+    op, the lag's 40 operations took 7 ms a trace)."""
+    return actuator.force_n(time_s, off_force_n, on_force_n, timing, 0.0)
 
 
 def lag_step_n(

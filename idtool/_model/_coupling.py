@@ -39,6 +39,7 @@ from idtool._model._contact import CycleAverage
 from idtool._model._laws import AbstractFrictionLaw
 from idtool._model._params import Param
 from idtool._model._settings import ParameterSetting
+from idtool._model._truth_fields import TruthField
 from idtool._registry import Registry
 
 __all__ = [
@@ -101,6 +102,24 @@ class AbstractCoupling(eqx.Module):
     @abc.abstractmethod
     def from_values(cls, values: Mapping[str, ArrayLike]) -> AbstractCoupling:
         """The law from parameter values by name (its ``fit_params``)."""
+
+    @classmethod
+    def truth_fields(cls) -> tuple[TruthField, ...]:
+        """The law's numbers in the simulator's parameter file: its ``fit_params``, the
+        one named by ``gain_param`` as ``gain``. A law whose simulation is set by other
+        numbers (``sdof``: its drive force) overrides this and :meth:`from_truth`."""
+        return tuple(
+            TruthField.of(p, "gain" if p.name == cls.gain_param else None) for p in cls.fit_params
+        )
+
+    @classmethod
+    def from_truth(cls, values: Mapping[str, float], max_amplitude_m: float) -> AbstractCoupling:
+        """The law from the values of :meth:`truth_fields` by their file names;
+        ``max_amplitude_m`` [m], the rig's horn amplitude at 100% command."""
+        del max_amplitude_m
+        return cls.from_values(
+            {(cls.gain_param if k == "gain" else k): v for k, v in values.items()}
+        )
 
     @abc.abstractmethod
     def amplitude_m(

@@ -70,6 +70,7 @@ from idtool._model._coupling import COUPLINGS, GAIN, AbstractCoupling
 from idtool._model._laws import AbstractFrictionLaw
 from idtool._model._params import Param
 from idtool._model._settings import ParameterSetting
+from idtool._model._truth_fields import TruthField
 
 __all__ = ["SdofCoupling", "sdof_detuning_n_m", "sdof_loss_stiffness_n_m"]
 
@@ -137,7 +138,8 @@ def sdof_loss_stiffness_n_m(
 
 @COUPLINGS.register("sdof")
 class SdofCoupling(AbstractCoupling):
-    """The SDOF transducer loaded by the contact (module docstring).
+    """The SDOF transducer driven by ``alpha Fe_max`` and loaded by the contact's friction,
+    solved by harmonic balance (module docstring).
 
     Attributes:
         gain: friction-free slip amplitude per commanded amplitude, over ``A_max`` [-].
@@ -185,6 +187,29 @@ class SdofCoupling(AbstractCoupling):
             gain=values["coupling_gain"],
             loss_stiffness_n_m=values["loss_stiffness_n_m"],
             detuning_n_m=values["detuning_n_m"],
+        )
+
+    @classmethod
+    def truth_fields(cls):
+        """The drive force at full command, R and D (default 0: driven at resonance);
+        the gain follows from them (:meth:`from_drive`)."""
+        return (
+            TruthField(
+                "drive_force_max_n",
+                "N",
+                "drive force amplitude Fe_max on the transducer at 100% command",
+            ),
+            TruthField.of(LOSS_STIFFNESS),
+            TruthField.of(DETUNING, default=0.0),
+        )
+
+    @classmethod
+    def from_truth(cls, values, max_amplitude_m):
+        return cls.from_drive(
+            values["drive_force_max_n"],
+            values["loss_stiffness_n_m"],
+            values.get("detuning_n_m", 0.0),
+            max_amplitude_m,
         )
 
     @classmethod

@@ -31,9 +31,19 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from idtool._model._params import Param
+from idtool._model._truth_fields import TruthField
 from idtool._registry import Registry
 
-__all__ = ["FRICTION_LAWS", "KT", "MU", "AbstractFrictionLaw", "Coulomb", "Dahl", "LuGre"]
+__all__ = [
+    "FRICTION_LAWS",
+    "KT",
+    "MU",
+    "TRUTH_NAMES",
+    "AbstractFrictionLaw",
+    "Coulomb",
+    "Dahl",
+    "LuGre",
+]
 
 FRICTION_LAWS: Registry[type[AbstractFrictionLaw]] = Registry("friction law")
 
@@ -60,6 +70,8 @@ KT = Param(
     start_box=(1e6, 1e11),
     description="tangential contact (bristle) stiffness",
 )
+# The simulator's parameter file names mu and Kt as it did before the registries.
+TRUTH_NAMES = {"mu": "friction_coefficient", "Kt": "contact_stiffness_n_m"}
 
 
 class AbstractFrictionLaw(eqx.Module):
@@ -81,6 +93,20 @@ class AbstractFrictionLaw(eqx.Module):
     ) -> AbstractFrictionLaw:
         """The law of the contact under ``normal_load_n`` [N], from parameter values by
         name (``mu`` and this law's ``fit_params``): ``Fc = mu N`` (notes §5)."""
+
+    @classmethod
+    def truth_fields(cls) -> tuple[TruthField, ...]:
+        """The law's numbers in the simulator's parameter file: mu and its
+        ``fit_params``, mu and Kt under their :data:`TRUTH_NAMES`."""
+        return tuple(TruthField.of(p, TRUTH_NAMES.get(p.name)) for p in (MU, *cls.fit_params))
+
+    @classmethod
+    def truth_at_load(
+        cls, values: Mapping[str, ArrayLike], normal_load_n: Float[ArrayLike, "*b"]
+    ) -> AbstractFrictionLaw:
+        """:meth:`at_load` from the values of :meth:`truth_fields` by their file names."""
+        back = {v: k for k, v in TRUTH_NAMES.items()}
+        return cls.at_load({back.get(k, k): v for k, v in values.items()}, normal_load_n)
 
     def level_n(self, v_m_s: Float[ArrayLike, "*b"]) -> Float[Array, "*b"]:
         """Steady bristle force ``L(V) = Kt g(V)`` [N] at slip velocity V [m/s] (eq. 2).

@@ -3,6 +3,10 @@
 The dataclasses mirror the JSON file one to one, so ``BenchParams.from_dict(p.to_dict())``
 is ``p`` and the schema's descriptions (with units) document every field.
 
+The ``contact``, ``coupling`` and ``actuator`` sections are the typed records of the
+registered part they name (:mod:`idtool._simulate._records`), checked against the schema
+made from the registries (:mod:`idtool._simulate._schema`).
+
 The optional fields describe departures of the bench from the fit's model (pull-to-pull
 scatter, a lagging actuator, offset drift, a coupling law the fit does not ship, a horn
 fading within its ON windows, a creeping friction level). Their
@@ -19,11 +23,18 @@ from pathlib import Path
 from typing import Any
 
 from idtool._data._dataset import Rig, TransducerSpec
-from idtool._data._schema import SIMULATOR_PARAMS_SCHEMA, schema_problems
+from idtool._data._schema import schema_problems
 from idtool._errors import IdtoolError
 from idtool._jsonio import parse_json
-from idtool._model._coupling import COUPLINGS, AbstractCoupling, SdofCoupling
-from idtool._simulate._truth_coupling import TRUTH_ONLY_COUPLINGS
+from idtool._simulate._records import (
+    ActuatorParams,
+    ContactParams,
+    CouplingParams,
+    actuator_record,
+    contact_record,
+    coupling_record,
+)
+from idtool._simulate._schema import simulator_params_schema
 
 __all__ = [
     "ActuatorParams",
@@ -40,99 +51,6 @@ __all__ = [
 ]
 
 PARAMS_VERSION = "1"
-
-
-@dataclasses.dataclass(frozen=True)
-class ContactParams:
-    """The true contact: Dahl with coefficient mu [-] and stiffness Kt [N/m]; optionally
-    mu creeping by ``level_creep_per_s`` [1/s] of itself per second of sliding."""
-
-    friction_law: str
-    friction_coefficient: float
-    contact_stiffness_n_m: float
-    # relative creep of mu with sliding time [1/s] (:mod:`idtool._simulate._plateau_drift`)
-    level_creep_per_s: float = 0.0
-
-
-@dataclasses.dataclass(frozen=True)
-class CouplingParams:
-    """Horn amplitude -> slip amplitude.
-
-    ``law`` is 'constant', 'power_limited' (load scale ``power_load_n`` P [N]),
-    'load_power' (also ``load_exponent`` beta [-]), 'exponential' (load scale
-    ``saturation_load_n`` P [N]) or the truth-only 'load_exponential' (load scale
-    ``load_scale_n`` [N]) and 'tanh_ceiling' (``ceiling_load_n`` [N]; see
-    :mod:`idtool._simulate._truth_coupling`), or 'sdof', the transducer loaded by the
-    contact (``drive_force_max_n`` [N], ``loss_stiffness_n_m`` [N/m], ``detuning_n_m``
-    [N/m], default 0; see :mod:`idtool._model._coupling_sdof`), which has no ``gain``.
-    """
-
-    law: str
-    gain: float | None = None
-    power_load_n: float | None = None
-    load_exponent: float | None = None
-    load_scale_n: float | None = None
-    ceiling_load_n: float | None = None
-    saturation_load_n: float | None = None
-    drive_force_max_n: float | None = None
-    loss_stiffness_n_m: float | None = None
-    detuning_n_m: float | None = None
-
-    @property
-    def in_fit(self) -> bool:
-        """Whether the fit ships this law (else the simulation is deliberately misspecified)."""
-        return self.law not in TRUTH_ONLY_COUPLINGS
-
-    def model(self, max_amplitude_m: float) -> AbstractCoupling:
-        """The coupling law of this name: the registry's (``power_limited`` in the file is
-        the registry's ``power-limited``), or a truth-only law of the simulator;
-        ``max_amplitude_m`` [m], the rig's horn amplitude at 100% (the sdof law's gain is
-        its drive over it)."""
-        values: dict[str, Any] = {
-            "coupling_gain": self.gain,
-            "power_load_n": self.power_load_n,
-            "load_exponent": self.load_exponent,
-            "load_scale_n": self.load_scale_n,
-            "ceiling_load_n": self.ceiling_load_n,
-            "saturation_load_n": self.saturation_load_n,
-            "drive_force_max_n": self.drive_force_max_n,
-            "loss_stiffness_n_m": self.loss_stiffness_n_m,
-            "detuning_n_m": 0.0 if self.detuning_n_m is None else self.detuning_n_m,
-        }
-        if self.law == "sdof":  # the file gives the drive; the law, its gain
-            assert self.drive_force_max_n is not None and self.loss_stiffness_n_m is not None
-            return SdofCoupling.from_drive(
-                self.drive_force_max_n,
-                self.loss_stiffness_n_m,
-                values["detuning_n_m"],
-                max_amplitude_m,
-            )
-        if self.law in TRUTH_ONLY_COUPLINGS:
-            return TRUTH_ONLY_COUPLINGS[self.law].from_values(values)
-        return COUPLINGS.get(self.law.replace("_", "-")).from_values(values)
-
-
-ACTUATOR_MODELS = ("slope", "lag")
-
-
-@dataclasses.dataclass(frozen=True)
-class ActuatorParams:
-    """The pneumatic actuator: when the pull starts [s] and how the force follows its target.
-
-    ``model`` 'slope' (the fit's model): constant start-up and ON/OFF slopes [N/s] with
-    corners rounded over ``corner_n`` [N]. ``model`` 'lag': a first-order lag of time
-    constant ``time_constant_s`` [s] whose rate is limited to ``rate_limit_n_s`` [N/s],
-    for the start-up as well as the ON/OFF switchings. Each model's fields are None
-    under the other.
-    """
-
-    pull_start_s: float
-    startup_slope_n_s: float | None = None
-    slope_n_s: float | None = None
-    corner_n: float | None = None
-    model: str = "slope"
-    time_constant_s: float | None = None
-    rate_limit_n_s: float | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -238,7 +156,8 @@ class BenchParams:
         Raises:
             IdtoolError: listing every schema violation, located by field.
         """
-        problems = schema_problems(document, SIMULATOR_PARAMS_SCHEMA, file)
+        # the schema of the parts registered now (a part registered after import included)
+        problems = schema_problems(document, simulator_params_schema(), file)
         if problems:
             raise IdtoolError(f"{file}: invalid simulator parameters", problems)
         d = document
@@ -257,17 +176,9 @@ class BenchParams:
                 ),
                 transducer=TransducerSpec.from_dict(d["rig"].get("transducer")),
             ),
-            contact=ContactParams(
-                friction_law=d["contact"]["friction_law"],
-                friction_coefficient=float(d["contact"]["friction_coefficient"]),
-                contact_stiffness_n_m=float(d["contact"]["contact_stiffness_n_m"]),
-                level_creep_per_s=float(d["contact"].get("level_creep_per_s", 0.0)),
-            ),
-            coupling=CouplingParams(
-                law=d["coupling"]["law"],
-                **{k: float(v) for k, v in d["coupling"].items() if k != "law"},
-            ),
-            actuator=_actuator(d["actuator"]),
+            contact=contact_record(d["contact"]),
+            coupling=coupling_record(d["coupling"]),
+            actuator=actuator_record(d["actuator"]),
             horn_switching=SwitchingParams(**_floats(d["horn_switching"])),
             load_cell=LoadCellParams(**_floats(d["load_cell"])),
             experiments=_experiments(d["experiments"]),
@@ -316,11 +227,6 @@ def _optional_float(value: Any) -> float | None:
 
 def _floats(section: Mapping[str, Any]) -> dict[str, float]:
     return {k: float(v) for k, v in section.items()}
-
-
-def _actuator(section: Mapping[str, Any]) -> ActuatorParams:
-    values: dict[str, Any] = {k: float(v) for k, v in section.items() if k != "model"}
-    return ActuatorParams(model=section.get("model", "slope"), **values)
 
 
 def _experiments(section: Mapping[str, Any]) -> ExperimentParams:

@@ -13,7 +13,7 @@ so a fit on such a bench must notice them in its residuals
   with ``t_on`` [s] the time since the horn switched on, ``f = fade_fraction`` [-] and
   ``tau = fade_time_constant_s`` [s]. Less slip amplitude gives less reduction, so the
   ON level ``FR(a(t)) mu N`` rises through the window; the contact model gives FR at each
-  amplitude (Dahl at the trace's mu and Kt, :func:`fade_ratio_curve`). The actuator
+  amplitude (the contact's law at the trace's mu, :func:`fade_ratio_curve`). The actuator
   follows the moving target as it follows a step: the force is
   ``OFF - w(t) (OFF - ON(t))`` with ``w`` the fraction of the ON dip the actuator has
   covered (0 before the switch-on, 1 at the ON level, back to 0 after the recovery) and
@@ -36,8 +36,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from idtool._model._bench import dahl_at_load
 from idtool._model._contact import prescribed_cycle_average
+from idtool._model._laws import AbstractFrictionLaw
 from idtool._simulate._params import BenchParams
 from idtool._simulate._truth import TraceTruth
 
@@ -68,16 +68,13 @@ def fade_factor(time_s: np.ndarray, horn_on_s: tuple[float, float], fraction: fl
 
 
 @functools.partial(jax.jit, static_argnames=("n",))
-def _friction_ratios(mu, kt_n_m, load_n, speed_m_s, w_rad_s, amplitudes_m, n=FADE_GRID):
-    law = dahl_at_load(mu, kt_n_m, load_n)
+def _friction_ratios(law, speed_m_s, w_rad_s, amplitudes_m, n=FADE_GRID):
     one = lambda a: prescribed_cycle_average(law, speed_m_s, a, w_rad_s).friction_ratio  # noqa: E731
     return jax.vmap(one)(jnp.reshape(amplitudes_m, (n,)))
 
 
 def fade_ratio_curve(
-    mu: float,
-    kt_n_m: float,
-    load_n: float,
+    law: AbstractFrictionLaw,
     speed_m_s: float,
     vibration_frequency_hz: float,
     slip_amplitude_m: float,
@@ -85,11 +82,11 @@ def fade_ratio_curve(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Amplitude factors ``g`` from ``1 - fraction`` to 1 and ``FR(g a0) / FR(a0)`` [-]
     there: how much the ON level rises when the slip amplitude ``a0`` [m] has faded to
-    ``g a0`` (Dahl of coefficient ``mu`` and stiffness ``kt_n_m`` [N/m] under ``load_n``
-    [N], sliding at ``speed_m_s`` [m/s], vibrating at ``vibration_frequency_hz`` [Hz])."""
+    ``g a0`` (the contact ``law`` at its load, sliding at ``speed_m_s`` [m/s], vibrating
+    at ``vibration_frequency_hz`` [Hz])."""
     g = np.linspace(1.0 - fraction, 1.0, FADE_GRID)
     w = 2.0 * math.pi * vibration_frequency_hz
-    fr = np.asarray(_friction_ratios(mu, kt_n_m, load_n, speed_m_s, w, g * slip_amplitude_m))
+    fr = np.asarray(_friction_ratios(law, speed_m_s, w, g * slip_amplitude_m))
     return g, fr / fr[-1]
 
 
@@ -148,9 +145,7 @@ def on_level_over_time_n(params: BenchParams, trace: TraceTruth, time_s: np.ndar
     fading = params.horn_fading
     assert trace.horn_on_s is not None
     g, ratio = fade_ratio_curve(
-        trace.friction_coefficient,
-        params.contact.contact_stiffness_n_m,
-        trace.normal_load_n,
+        params.contact.law_at(trace.normal_load_n, trace.friction_coefficient),
         trace.pull_speed_m_s,
         params.rig.vibration_frequency_hz,
         trace.slip_amplitude_m,

@@ -10,10 +10,11 @@ noise, mains hum (at any frequency) and ADC quantisation. Trace ``k`` draws from
 time.
 
 Optional departures from the fit's model (:mod:`idtool._simulate._params`): pull-to-pull
-scatter of FR and mu, a rate-limited first-order-lag actuator (:mod:`idtool._simulate._lag`),
-a linear drift of the offset, a truth-only coupling law
-(:mod:`idtool._simulate._truth_coupling`), a horn fading within its ON windows and a
-creeping friction level (:mod:`idtool._simulate._plateau_drift`). Their random draws
+scatter of FR and mu, a rate-limited first-order-lag actuator
+(:class:`idtool._model._actuator.LagActuator`), a linear drift of the offset, a
+truth-only coupling law (:mod:`idtool._simulate._truth_coupling`), a horn fading within
+its ON windows and a creeping friction level (:mod:`idtool._simulate._plateau_drift`).
+Their random draws
 come from one child stream of the trace's stream (``rng.spawn(1)``), which leaves the
 trace's own stream untouched: with the departures off the output is bit for bit what it
 was before they existed, and turning on scatter, drift, the truth-only coupling, the
@@ -35,16 +36,15 @@ from pathlib import Path
 from typing import Any
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from idtool._data._dataset import Dataset, dataset_from_bytes
 from idtool._data._write import document, json_bytes, render_table, trace_entry, write_dataset
 from idtool._errors import IdtoolError
-from idtool._model._bench import TraceTiming, dahl_at_load, mean_force_n, on_contact
-from idtool._simulate._lag import lag_actuator_force_n
+from idtool._model._actuator import AbstractActuator
+from idtool._model._bench import TraceTiming, on_contact
 from idtool._simulate._noise import ar1_noise, mains_hum, quantise, white_noise
-from idtool._simulate._params import ActuatorParams, BenchParams
+from idtool._simulate._params import BenchParams
 from idtool._simulate._plateau_drift import on_force_end_n, with_plateau_drifts
 from idtool._simulate._truth import BenchTruth, OperatingPoint, OperatingPointTruth, TraceTruth
 
@@ -60,15 +60,17 @@ __all__ = [
 
 TRUTH_FILE = "true_parameters.json"
 MAX_SAMPLES = 5e7  # all traces together: about 1 GB of doubles in flight
-# The lag actuator's start-up counts as over once the exponential tail is down to
-# exp(-5) < 1% of where it started: the steady OFF sliding is measured from there.
-LAG_SETTLE_TIME_CONSTANTS = 5.0
-# The lag actuator "reaches" the ON level when within this fraction of the ON-OFF depth.
-LAG_REACH_FRACTION = 0.02
 
-# Compiled once per padded length (below); run op by op, every length would recompile
-# each op.
-_mean_force_n = jax.jit(mean_force_n)
+
+# Compiled once per actuator model and padded length (below); run op by op, every length
+# would recompile each op. jax.jit, not eqx.filter_jit: the latter would hold the trace's
+# levels and times (Python floats) static and compile once per trace (measured: 3.0 s a
+# lag bench against 1.8 s).
+@jax.jit
+def _actuator_force_n(actuator, time_s, off_force_n, on_force_n, timing, offset_n):
+    return actuator.force_n(time_s, off_force_n, on_force_n, timing, offset_n)
+
+
 # Times are padded to a multiple of this many samples before the compiled bench model, so
 # traces of nearly equal length (scatter moves every trace's length) share one compilation.
 # The model is elementwise in time, so the padding changes no value.
@@ -108,8 +110,8 @@ def operating_point(
     """
     c, rig = params.contact, params.rig
     v = params.experiments.pull_speeds_m_s[0] if speed_m_s is None else speed_m_s
-    coupling = params.coupling.model(rig.max_amplitude_m)
-    law = dahl_at_load(c.friction_coefficient, jnp.asarray(c.contact_stiffness_n_m), load_n)
+    coupling = params.coupling.coupling(rig.max_amplitude_m)
+    law = c.law_at(load_n)
     w = 2.0 * math.pi * rig.vibration_frequency_hz
     fr, a = (
         float(x)
@@ -121,7 +123,9 @@ def operating_point(
         "friction_ratio": float(fr),
         "slip_amplitude_m": a,
         "velocity_ratio": v / (a * w) if a > 0 else math.inf,
-        "dimensionless_stiffness": c.contact_stiffness_n_m * a / (c.friction_coefficient * load_n),
+        "dimensionless_stiffness": float(law.stiffness_n_m())
+        * a
+        / (c.friction_coefficient * load_n),
     }
 
 
@@ -140,28 +144,13 @@ def true_friction_ratio(
     return operating_point(params, load_n, amplitude_fraction, speed_m_s)["friction_ratio"]
 
 
-def _startup_duration_s(act: ActuatorParams, off_n: float) -> float:
-    """Time [s] from the pull start until the force has risen to the OFF level ``off_n``."""
-    if act.model == "lag":
-        tau, rate = _lag_constants(act)
-        return max(off_n - rate * tau, 0.0) / rate + LAG_SETTLE_TIME_CONSTANTS * tau
-    assert act.startup_slope_n_s is not None  # the schema requires it with model 'slope'
-    return off_n / act.startup_slope_n_s
-
-
-def _lag_constants(act: ActuatorParams) -> tuple[float, float]:
-    """Time constant [s] and rate limit [N/s] of the lag actuator."""
-    assert act.time_constant_s is not None and act.rate_limit_n_s is not None  # schema
-    return act.time_constant_s, act.rate_limit_n_s
-
-
 def _total_samples(params: BenchParams, plan: tuple[OperatingPoint, ...]) -> float:
     """About how many samples the plan writes, all traces together."""
-    act, e = params.actuator, params.experiments
+    e, actuator = params.experiments, params.actuator.actuator()
     mu = params.contact.friction_coefficient
     seconds = sum(
-        act.pull_start_s
-        + _startup_duration_s(act, mu * point.normal_load_n)
+        params.actuator.pull_start_s
+        + actuator.startup_duration_s(mu * point.normal_load_n)
         + e.sliding_before_s
         + point.on_duration_s
         + e.sliding_after_s
@@ -170,62 +159,48 @@ def _total_samples(params: BenchParams, plan: tuple[OperatingPoint, ...]) -> flo
     return seconds * e.sample_rate_hz
 
 
+def _timing(trace: TraceTruth) -> TraceTiming:
+    """The trace's pull start and the horn's (physical) ON window [s]; infinite without
+    an ON window."""
+    horn = trace.horn_on_s
+    return TraceTiming(
+        startup_s=trace.startup_s,
+        on_start_s=horn[0] if horn else math.inf,
+        on_end_s=horn[1] if horn else math.inf,
+    )
+
+
 def noise_free_force_n(params: BenchParams, trace: TraceTruth, time_s: np.ndarray) -> np.ndarray:
     """The force [N] a trace was made from before noise, hum and quantisation.
 
-    The actuator's response to the trace's OFF and ON levels at the horn's (physical) ON
-    window, plus the load-cell offset and its drift.
+    The actuator's response (:meth:`idtool._model._actuator.AbstractActuator.force_n`)
+    to the trace's OFF and ON levels at the horn's (physical) ON window, plus the
+    load-cell offset and its drift.
     """
-    act = params.actuator
     time_s = np.asarray(time_s, dtype=np.float64)
-    if act.model == "lag":
-        tau, rate = _lag_constants(act)
-        force = trace.load_cell_offset_n + lag_actuator_force_n(
-            time_s, trace.off_force_n, trace.on_force_n, trace.startup_s, trace.horn_on_s, tau, rate
+    n = time_s.size
+    padded = np.pad(time_s, (0, -n % _PAD_SAMPLES), mode="edge")
+    force = np.asarray(
+        _actuator_force_n(
+            params.actuator.actuator(),
+            padded,
+            trace.off_force_n,
+            trace.on_force_n,
+            _timing(trace),
+            trace.load_cell_offset_n,
         )
-    else:
-        assert act.slope_n_s is not None and act.startup_slope_n_s is not None  # schema
-        horn = trace.horn_on_s
-        timing = TraceTiming(
-            startup_s=trace.startup_s,
-            on_start_s=horn[0] if horn else math.inf,
-            on_end_s=horn[1] if horn else math.inf,
-        )
-        n = time_s.size
-        padded = np.pad(time_s, (0, -n % _PAD_SAMPLES), mode="edge")
-        force = np.asarray(
-            _mean_force_n(
-                padded,
-                trace.off_force_n,
-                trace.on_force_n,
-                timing,
-                act.slope_n_s,
-                act.startup_slope_n_s,
-                trace.load_cell_offset_n,
-                act.corner_n,
-            )
-        )[:n]
+    )[:n]
     force = with_plateau_drifts(params, trace, time_s, force)
     if trace.offset_drift_n_s != 0.0:  # skipped at 0 so the default output is unchanged
         force = force + trace.offset_drift_n_s * time_s
     return force
 
 
-def _reaches_on_level(params: BenchParams, trace: TraceTruth) -> bool:
+def _reaches_on_level(actuator: AbstractActuator, trace: TraceTruth) -> bool:
     """Whether the force gets down to the ON level before the horn switches OFF."""
-    act, horn = params.actuator, trace.horn_on_s
-    if horn is None:
+    if trace.horn_on_s is None:
         return False
-    depth = trace.off_force_n - trace.on_force_n
-    if act.model == "lag":
-        end = np.array([horn[1]])
-        tau, rate = _lag_constants(act)
-        lowest = lag_actuator_force_n(
-            end, trace.off_force_n, trace.on_force_n, trace.startup_s, horn, tau, rate
-        )[0]
-        return bool(lowest - trace.on_force_n <= LAG_REACH_FRACTION * depth)
-    assert act.slope_n_s is not None  # the schema requires it with model 'slope'
-    return bool(act.slope_n_s * (horn[1] - horn[0]) >= depth)
+    return actuator.reaches_level(trace.off_force_n, trace.on_force_n, _timing(trace))
 
 
 def _simulate_trace(
@@ -237,6 +212,7 @@ def _simulate_trace(
     """Truth, times [s], forces [N] and logged ON flags of one trace (``op``: its
     operating point)."""
     act, cell, e = params.actuator, params.load_cell, params.experiments
+    actuator = act.actuator()
     fs = e.sample_rate_hz
     # The departures draw from a child of the trace's stream: spawning draws nothing from
     # ``rng``, so the draws below (and all the noise) are those of a simulation without
@@ -256,11 +232,11 @@ def _simulate_trace(
     drift = cell.offset_drift_sd_n_s * z_drift
     off = mu * point.normal_load_n
     on_level = ratio * off
-    startup_end = act.pull_start_s + _startup_duration_s(act, off)
+    startup_end = act.pull_start_s + actuator.startup_duration_s(off)
     # The logged ON window is planned from the nominal OFF level, so scatter changes the
     # levels but neither the timing nor the trace length (hence none of the noise draws).
     nominal_off = params.contact.friction_coefficient * point.normal_load_n
-    planned_startup_end = act.pull_start_s + _startup_duration_s(act, nominal_off)
+    planned_startup_end = act.pull_start_s + actuator.startup_duration_s(nominal_off)
     i_on = round((planned_startup_end + e.sliding_before_s) * fs)
     i_off = i_on + round(point.on_duration_s * fs)
     n = i_off + round(e.sliding_after_s * fs) + 1
@@ -298,7 +274,7 @@ def _simulate_trace(
     )
     truth = dataclasses.replace(
         truth,
-        reaches_on_level=_reaches_on_level(params, truth),
+        reaches_on_level=_reaches_on_level(actuator, truth),
         on_force_end_n=on_force_end_n(params, truth),
     )
     noisy = (
@@ -321,7 +297,7 @@ def _operating_point_truths(
         key = (point.normal_load_n, point.amplitude_fraction, v)
         if key not in out:
             op = operating_point(params, *key)
-            vr = op["velocity_ratio"]
+            vr, lam = op["velocity_ratio"], op["dimensionless_stiffness"]
             out[key] = OperatingPointTruth(
                 normal_load_n=key[0],
                 amplitude_fraction=key[1],
@@ -329,7 +305,7 @@ def _operating_point_truths(
                 friction_ratio=op["friction_ratio"],
                 slip_amplitude_m=op["slip_amplitude_m"],
                 velocity_ratio=vr if math.isfinite(vr) else None,
-                dimensionless_stiffness=op["dimensionless_stiffness"],
+                dimensionless_stiffness=lam if math.isfinite(lam) else None,
             )
     return out
 

@@ -35,14 +35,15 @@ class TraceTruth:
             without the offset.
         slip_amplitude_m: effective slip amplitude a from the coupling [m].
         velocity_ratio: VR = v / (a w) (None without vibration).
-        dimensionless_stiffness: Lambda = Kt a / (mu N), at the nominal mu.
+        dimensionless_stiffness: Lambda = Kt a / (mu N), at the nominal mu (None for a
+            rigid law: Coulomb's Kt is infinite).
         load_cell_offset_n: this trace's offset at time 0 [N].
         startup_s: pull start [s].
         logged_on_s, horn_on_s: ON window of the logged flag and of the horn [s]
             (None without ON).
         mains_phase_rad: phase of the hum.
         reaches_on_level: whether the force gets down to the ON level before OFF (lag
-            actuator: to within ``LAG_REACH_FRACTION`` of the ON-OFF depth).
+            actuator: to within ``idtool._model._actuator.REACH_FRACTION`` of the ON-OFF depth).
         friction_coefficient: this trace's mu [-], with scatter.
         operating_point_friction_ratio: FR of the operating point without scatter.
         offset_drift_n_s: this trace's offset drift rate [N/s]: the offset at time t is
@@ -66,7 +67,7 @@ class TraceTruth:
     on_force_n: float
     slip_amplitude_m: float
     velocity_ratio: float | None
-    dimensionless_stiffness: float
+    dimensionless_stiffness: float | None
     load_cell_offset_n: float
     startup_s: float
     logged_on_s: tuple[float, float] | None
@@ -92,7 +93,7 @@ class OperatingPointTruth:
             curve a fit should recover.
         slip_amplitude_m: effective slip amplitude a [m].
         velocity_ratio: VR = v / (a w) (None without vibration).
-        dimensionless_stiffness: Lambda = Kt a / (mu N).
+        dimensionless_stiffness: Lambda = Kt a / (mu N) (None for a rigid law).
     """
 
     normal_load_n: float
@@ -101,7 +102,7 @@ class OperatingPointTruth:
     friction_ratio: float
     slip_amplitude_m: float
     velocity_ratio: float | None
-    dimensionless_stiffness: float
+    dimensionless_stiffness: float | None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -127,8 +128,7 @@ class BenchTruth:
             "idtool_version": __version__,
             "dataset_sha256": self.dataset_sha256,
             "friction_law": contact.friction_law,
-            "friction_coefficient": contact.friction_coefficient,
-            "contact_stiffness_n_m": contact.contact_stiffness_n_m,
+            **contact.values(),  # mu and the law's own parameters, by their file names
             "coupling": self.params.to_dict()["coupling"],
             "coupling_in_fit": self.params.coupling.in_fit,
             "operating_points": [dataclasses.asdict(o) for o in self.operating_points],

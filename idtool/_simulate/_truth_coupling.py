@@ -27,11 +27,18 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from idtool._model._coupling import AbstractCoupling
+from idtool._model._coupling import GAIN, AbstractCoupling
+from idtool._model._params import Param
+from idtool._registry import Registry
 
 __all__ = ["TRUTH_ONLY_COUPLINGS", "LoadExponentialCoupling", "TanhCeilingCoupling"]
 
+# Registered under the simulator parameter file's name (``coupling.law``); the simulator
+# reads these beside :data:`idtool._model._coupling.COUPLINGS`.
+TRUTH_ONLY_COUPLINGS: Registry[type[AbstractCoupling]] = Registry("truth-only coupling law")
 
+
+@TRUTH_ONLY_COUPLINGS.register("load_exponential")
 class LoadExponentialCoupling(AbstractCoupling):
     """Truth only: ``a = gain * alpha * A_max * exp(-N / load_scale_n)`` [m].
 
@@ -42,7 +49,17 @@ class LoadExponentialCoupling(AbstractCoupling):
 
     gain: Float[ArrayLike, ""]
     load_scale_n: Float[ArrayLike, ""]
-    name: ClassVar[str] = "load_exponential"
+    fit_params: ClassVar[tuple[Param, ...]] = (
+        GAIN,
+        Param(
+            "load_scale_n",
+            "N",
+            "log",
+            1.0,
+            1e5,
+            description="normal load over which the slip amplitude falls by a factor e",
+        ),
+    )
 
     @classmethod
     def from_values(cls, values: Mapping[str, ArrayLike]) -> LoadExponentialCoupling:
@@ -59,6 +76,7 @@ class LoadExponentialCoupling(AbstractCoupling):
         return jnp.asarray(self.gain * alpha * max_amplitude_m * decay)
 
 
+@TRUTH_ONLY_COUPLINGS.register("tanh_ceiling")
 class TanhCeilingCoupling(AbstractCoupling):
     """Truth only: ``a = gain * A_max * c * tanh(alpha / c)``, ``c = sqrt(L / N)`` [m].
 
@@ -69,7 +87,18 @@ class TanhCeilingCoupling(AbstractCoupling):
 
     gain: Float[ArrayLike, ""]
     ceiling_load_n: Float[ArrayLike, ""]
-    name: ClassVar[str] = "tanh_ceiling"
+    fit_params: ClassVar[tuple[Param, ...]] = (
+        GAIN,
+        Param(
+            "ceiling_load_n",
+            "N",
+            "log",
+            1.0,
+            1e5,
+            description="load scale L of the ceiling c = sqrt(L / N) of the commanded "
+            "amplitude fraction",
+        ),
+    )
 
     @classmethod
     def from_values(cls, values: Mapping[str, ArrayLike]) -> TanhCeilingCoupling:
@@ -85,10 +114,3 @@ class TanhCeilingCoupling(AbstractCoupling):
         # the ceiling as a commanded fraction; a zero load (no contact) has none
         c = jnp.sqrt(jnp.asarray(self.ceiling_load_n) / jnp.maximum(normal_load_n, 1e-9))
         return jnp.asarray(self.gain * max_amplitude_m * c * jnp.tanh(alpha / c))
-
-
-# The simulator parameter file's name of each truth-only law (``coupling.law``).
-TRUTH_ONLY_COUPLINGS: dict[str, type[AbstractCoupling]] = {
-    "load_exponential": LoadExponentialCoupling,
-    "tanh_ceiling": TanhCeilingCoupling,
-}

@@ -1,0 +1,154 @@
+"""The simulator's parameter schema is made from the registries (idtool._simulate._schema):
+the shipped file is that function's output, and a part registered later is simulated
+through its typed record, its fields checked like the shipped parts'."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import json
+import pickle
+from typing import ClassVar
+
+import jax.numpy as jnp
+import pytest
+
+from idtool._data._example import example_params_path
+from idtool._data._schema import SIMULATOR_PARAMS_SCHEMA, _schema_text
+from idtool._data._write import json_bytes
+from idtool._errors import IdtoolError
+from idtool._model._coupling import COUPLINGS, GAIN, AbstractCoupling
+from idtool._model._params import Param
+from idtool._simulate import _records
+from idtool._simulate._departures import departure_params
+from idtool._simulate._params import BenchParams, load_bench_params
+from idtool._simulate._records import coupling_laws, friction_laws
+from idtool._simulate._schema import schema_text, simulator_params_schema
+from idtool._simulate._simulate import simulate_bench
+
+
+def test_the_schema_file_is_the_generated_schema():
+    """Regenerate with ``python -m idtool._simulate._schema > datasets_schema/...``."""
+    assert _schema_text(SIMULATOR_PARAMS_SCHEMA) == schema_text()
+
+
+def test_every_registered_coupling_law_is_a_simulator_choice():
+    schema = simulator_params_schema()
+    choices = schema["properties"]["coupling"]["properties"]["law"]["enum"]
+    assert {n.replace("-", "_") for n in COUPLINGS} < set(choices)
+    assert {"load_exponential", "tanh_ceiling"} < set(choices)
+    laws = schema["properties"]["contact"]["properties"]["friction_law"]["enum"]
+    assert laws == ["coulomb", "dahl", "lugre"]
+
+
+def _example() -> dict:
+    p = json.loads(example_params_path().read_text())
+    p["experiments"].update(normal_loads_n=[450.0], amplitude_fractions=[0.5], repeats=1)
+    p["experiments"]["on_durations_s"] = [1.0]
+    return p
+
+
+def test_a_wrong_field_for_the_law_is_located():
+    p = _example()
+    p["coupling"] = {"law": "exponential", "gain": 0.03, "power_load_n": 125.0}
+    with pytest.raises(IdtoolError) as err:
+        BenchParams.from_dict(p, "p.json")
+    text = "\n".join(str(x) for x in err.value.problems)
+    assert "coupling.saturation_load_n" in text and "missing required field" in text
+    assert "remove field(s) power_load_n" in text
+    p["coupling"] = {"law": "power_limited", "gain": -1.0, "power_load_n": 125.0}
+    with pytest.raises(IdtoolError, match="invalid simulator parameters") as err:
+        BenchParams.from_dict(p, "p.json")
+    assert "coupling.gain" in str(err.value.problems[0]) and "must be > 0" in str(
+        err.value.problems[0]
+    )
+
+
+class SquareRootCoupling(AbstractCoupling):
+    """Toy: ``a = gain * sqrt(alpha) * A_max`` [m]."""
+
+    gain: float
+    fit_params: ClassVar[tuple[Param, ...]] = (GAIN,)
+
+    @classmethod
+    def from_values(cls, values):
+        return cls(gain=values["coupling_gain"])
+
+    def amplitude_m(self, amplitude_fraction, normal_load_n, max_amplitude_m):
+        shape = jnp.broadcast_shapes(jnp.shape(amplitude_fraction), jnp.shape(normal_load_n))
+        a = self.gain * jnp.sqrt(jnp.asarray(amplitude_fraction)) * max_amplitude_m
+        return jnp.broadcast_to(a, shape)
+
+
+def test_a_coupling_registered_later_is_simulated():
+    COUPLINGS.register("square-root")(SquareRootCoupling)
+    try:
+        assert coupling_laws()["square_root"] is SquareRootCoupling
+        p = _example()
+        p["coupling"] = {"law": "square_root", "gain": 0.03}
+        params = BenchParams.from_dict(copy.deepcopy(p))
+        assert type(params.coupling).__name__ == "SquareRootCouplingParams"
+        assert params.coupling.coupling(85e-6) == SquareRootCoupling(gain=0.03)
+        _, truth = simulate_bench(params, seed=1)
+        a = truth.operating_points[0].slip_amplitude_m
+        assert a == pytest.approx(0.03 * 0.5**0.5 * 85e-6, rel=1e-12)
+        assert BenchParams.from_dict(params.to_dict()) == params
+    finally:
+        COUPLINGS._entries.pop("square-root")
+
+
+def _shrunk(params: BenchParams) -> BenchParams:
+    """The first two loads and amplitudes, one repeat (a quick bench)."""
+    e = params.experiments
+    loads, amplitudes = e.normal_loads_n[:2], e.amplitude_fractions[:2]
+    small = dataclasses.replace(e, repeats=1, normal_loads_n=loads, amplitude_fractions=amplitudes)
+    return dataclasses.replace(params, experiments=small)
+
+
+# sha256 of the datasets simulated (seed 7) before the simulator took its parts from the
+# registries (main at 3be9e74): the records and the model's actuator change no byte.
+_BEFORE = {
+    "example": "481cb652d3eff226bba7e69cf3c0e88675898ea078876cda4820629c20db5e5c",
+    "lag actuator": "3423257b91cabbf33b23845b3bcf9f44ff585e9f9ae100f9560a14ba036a7d2d",
+    "fading": "14f15ca089a61da1e37729c6e6a357643b8bb76a16b1c54a1544e9557ad5b938",
+}
+
+
+@pytest.mark.parametrize("bench", list(_BEFORE))
+def test_the_benches_are_those_simulated_before_the_registries(bench):
+    if bench == "example":
+        params = load_bench_params(example_params_path())
+    else:
+        kind = {"lag actuator": "actuator"}.get(bench, bench)
+        params = _shrunk(departure_params(kind, 5))
+    dataset, _ = simulate_bench(params, seed=7)
+    assert dataset.sha256 == _BEFORE[bench]
+
+
+def test_a_record_pickles_and_is_found_by_name():
+    params = load_bench_params(example_params_path())
+    assert pickle.loads(pickle.dumps(params)) == params
+    # another process finds a record class by name before making it (module __getattr__)
+    assert _records.LuGreParams.part.__name__ == "LuGre"
+    with pytest.raises(AttributeError):
+        _records.NoSuchParams  # noqa: B018
+
+
+def test_every_registered_friction_law_is_simulated():
+    values = {
+        "friction_coefficient": 0.3,
+        "contact_stiffness_n_m": 1e9,
+        "static_ratio": 1.3,
+        "stribeck_velocity_m_s": 0.01,
+    }
+    ratios = {}
+    for name, law in friction_laws().items():
+        p = _example()
+        p["contact"] = {"friction_law": name} | {f.name: values[f.name] for f in law.truth_fields()}
+        _, truth = simulate_bench(p, seed=1)
+        json_bytes(truth.to_dict())  # the truth file, a rigid law's Lambda as null
+        ratios[name] = truth.operating_points[0].friction_ratio
+        assert (truth.operating_points[0].dimensionless_stiffness is None) == (name == "coulomb")
+    # a static level above the kinetic one pulls the ON level up a little; the rigid
+    # law's vibration reduces more than the compliant one's
+    assert ratios["coulomb"] < ratios["dahl"] < ratios["lugre"] < 1.0
