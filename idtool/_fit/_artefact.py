@@ -202,10 +202,17 @@ def _law_fit(spec: ModelSpec, data: FitData, state: Mapping[str, np.ndarray], wh
     )
 
 
-def _estimates(doc: Mapping[str, Any]) -> dict[str, Estimate]:
-    """Every shared parameter's estimate as ``fit.json`` records it."""
+def _estimates(doc: Mapping[str, Any], model: BenchModel) -> dict[str, Estimate]:
+    """Every parameter's estimate as ``fit.json`` records it: the shared ones, then each
+    trace's own (``offset_n[N270_A50_T1]``, from the trace's entry of ``traces``)."""
     entries = doc.get("parameters", {}) | doc.get("bench", {})
-    return {name: estimate_of_doc(name, e) for name, e in entries.items()}
+    out = {name: estimate_of_doc(name, e) for name, e in entries.items()}
+    for trace in doc.get("traces", []):
+        for key, _, _ in model.trace_groups:
+            if key in trace:
+                name = f"{key}[{trace['id']}]"
+                out[name] = estimate_of_doc(name, trace[key])
+    return out
 
 
 def _optima(doc: Mapping[str, Any], model: BenchModel, state: Mapping[str, np.ndarray]):
@@ -279,7 +286,7 @@ def fit_artefact(
         dataset=dataset,
         data=data,
         chosen=chosen,
-        estimates=_estimates(doc),
+        estimates=_estimates(doc, chosen.model),
         optima=_optima(doc, chosen.model, states[FIT_STATE.name]),
         warnings=_sentences(doc, "warnings"),
         notes=_sentences(doc, "notes"),
