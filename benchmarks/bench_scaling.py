@@ -61,10 +61,13 @@ model = bench_model(data)
 z = model.z0()
 _program.run_lm(model, z, np.ones(z.size, bool), 0.0, 0)  # compile the program
 t = time.perf_counter()
-result = check_intervals(fit_model(data))
+fitted = fit_model(data)
+fit_s = time.perf_counter() - t
+result = check_intervals(fitted)
 wall = time.perf_counter() - t
 json.dump({{
-    "traces": data.n_traces, "seconds": wall,
+    "traces": data.n_traces, "seconds": wall, "fit_seconds": fit_s,
+    "converged": not any(w.code == "lm_not_converged" for w in fitted.warnings),
     "peak_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6,
     "steps": result.lm_steps,
     "estimates": {{k: result.estimates[k].estimate for k in model.physical_names}},
@@ -112,7 +115,10 @@ def main() -> int:
     ap.add_argument("--dense-max", type=int, default=48)
     args = ap.parse_args()
     rows: dict[str, list[dict]] = {"arrowhead": [], "dense": []}
-    print(f"{'traces':>6}  {'arrowhead s':>11} {'GB':>5} {'steps':>5}  {'dense s':>8} {'GB':>5}")
+    print(
+        f"{'traces':>6}  {'arrowhead s':>11} {'fit s':>6} {'GB':>5} {'steps':>5} {'conv':>5}"
+        f"  {'dense s':>8} {'GB':>5}"
+    )
     for n in args.counts:
         a = run(n, "arrowhead")
         d = run(n, "dense") if n <= args.dense_max else None
@@ -121,7 +127,10 @@ def main() -> int:
                 rows[key].append(r)
         cells = [f"{n:>6}"]
         cells.append(
-            f"{a['seconds']:>11.1f} {a['peak_gb']:>5.2f} {a['steps']:>5}" if a else " " * 23
+            f"{a['seconds']:>11.1f} {a['fit_seconds']:>6.1f} {a['peak_gb']:>5.2f} {a['steps']:>5}"
+            f" {'yes' if a['converged'] else 'NO':>5}"
+            if a
+            else " " * 36
         )
         cells.append(f"{d['seconds']:>8.1f} {d['peak_gb']:>5.2f}" if d else f"{'-':>8}")
         if a and d:  # same optimum on both paths
