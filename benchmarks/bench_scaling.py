@@ -18,13 +18,18 @@ with the exponent of a power law fitted to time against traces (least squares in
 Run: ``.venv/bin/python benchmarks/bench_scaling.py [--counts 12 24 48 96 384]
 [--dense-max 48]`` (15-20 minutes; the 384 traces alone 8 on a loaded 2-CPU machine).
 
-Measured 2026-11-25, load average 6-10 on 2 CPUs (other jobs; the timings are noisy):
-fit + checks 0.9, 12.4, 19.8, 148, 481 s and 0.49-1.07 GB at 12, 24, 48, 96, 384
-traces; dense 1.5, 12.1 s at 12, 24 and 246 s at 48. Per LM step (min of 3, 20-step
-runs): 4.2, 7.5, 24.5, 72, 217 ms; dense 4.4, 7.7, 214, 397 ms. What stays above linear
-is the number of refits: from 96 traces on, the fit and the refits stop short of their
-tolerance (the damping gives up after 60-100 steps) and some Wald ends rise by less
-than 1, so profiles are walked.
+Measured 2026-11-25, load average 6-10 on 2 CPUs (other jobs; the timings are noisy),
+before the OFF switch of the slope actuator was rounded: fit + checks 0.9, 12.4, 19.8,
+148, 481 s and 0.49-1.07 GB at 12, 24, 48, 96, 384 traces (time ~ traces^1.75); dense
+1.5, 12.1 s at 12, 24 and 246 s at 48. Per LM step (min of 3, 20-step runs): 4.2, 7.5,
+24.5, 72, 217 ms; dense 4.4, 7.7, 214, 397 ms. From 48 traces on the fit and its refits
+stopped short of their tolerance (the loss was kinked in the OFF delays: 60-100 steps
+until the damping gave up, and profiles walked where Wald ends rose by less than 1).
+
+After (same day, load average 10-12): 3.1, 6.4, 11.9, 43.8, 206 s (fit alone 2.9, 5.6,
+11.4, 38.3, 182 s) and 0.50-1.11 GB; every fit converged to LM's own tolerance in
+181-204 steps whatever the traces; time ~ traces^1.24 (1.29 from 24 to 384), most of
+it the per-step cost (LM step ~ traces^1.1) and the machine's load.
 """
 
 from __future__ import annotations
@@ -61,10 +66,13 @@ model = bench_model(data)
 z = model.z0()
 _program.run_lm(model, z, np.ones(z.size, bool), 0.0, 0)  # compile the program
 t = time.perf_counter()
-result = check_intervals(fit_model(data))
+fitted = fit_model(data)
+fit_s = time.perf_counter() - t
+result = check_intervals(fitted)
 wall = time.perf_counter() - t
 json.dump({{
-    "traces": data.n_traces, "seconds": wall,
+    "traces": data.n_traces, "seconds": wall, "fit_seconds": fit_s,
+    "converged": not any(w.code == "lm_not_converged" for w in fitted.warnings),
     "peak_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6,
     "steps": result.lm_steps,
     "estimates": {{k: result.estimates[k].estimate for k in model.physical_names}},
@@ -112,7 +120,10 @@ def main() -> int:
     ap.add_argument("--dense-max", type=int, default=48)
     args = ap.parse_args()
     rows: dict[str, list[dict]] = {"arrowhead": [], "dense": []}
-    print(f"{'traces':>6}  {'arrowhead s':>11} {'GB':>5} {'steps':>5}  {'dense s':>8} {'GB':>5}")
+    print(
+        f"{'traces':>6}  {'arrowhead s':>11} {'fit s':>6} {'GB':>5} {'steps':>5} {'conv':>5}"
+        f"  {'dense s':>8} {'GB':>5}"
+    )
     for n in args.counts:
         a = run(n, "arrowhead")
         d = run(n, "dense") if n <= args.dense_max else None
@@ -121,7 +132,10 @@ def main() -> int:
                 rows[key].append(r)
         cells = [f"{n:>6}"]
         cells.append(
-            f"{a['seconds']:>11.1f} {a['peak_gb']:>5.2f} {a['steps']:>5}" if a else " " * 23
+            f"{a['seconds']:>11.1f} {a['fit_seconds']:>6.1f} {a['peak_gb']:>5.2f} {a['steps']:>5}"
+            f" {'yes' if a['converged'] else 'NO':>5}"
+            if a
+            else " " * 36
         )
         cells.append(f"{d['seconds']:>8.1f} {d['peak_gb']:>5.2f}" if d else f"{'-':>8}")
         if a and d:  # same optimum on both paths

@@ -148,11 +148,15 @@ def test_short_on_windows_that_never_reach_the_on_level():
     assert not all(reached)  # the point of the test: several ON levels are never seen
     run = fit_dataset(dataset, seed=1)
     assert_recovered(run, truth_of(params))
-    # With two loads and short windows Kt is barely identified: its Gauss-Newton
-    # interval ([1.4e8, 7.3e8] here, missing the truth) is far too narrow, the
-    # likelihood check sees it and reports the profile interval instead.
-    checked = with_code(run.chosen.warnings, "profile_interval")
-    assert "Kt" in [w.values["parameter"] for w in checked]
+    # With two loads and short windows Kt is barely identified, and the reported
+    # interval must say so: either the Gauss-Newton one already spans the range
+    # ("uninformed"; here since the OFF switch's corner is rounded, issue 28) or, where
+    # it was far too narrow ([1.4e8, 7.3e8], missing the truth, with the corner
+    # unrounded), the likelihood check sees it and reports the profile interval.
+    wide = with_code(run.chosen.warnings, "profile_interval", "uninformed")
+    assert "Kt" in [w.values["parameter"] for w in wide]
+    lo, hi = run.chosen.estimates["Kt"].ci95
+    assert hi / lo > 100.0
 
 
 def test_a_spurious_multistart_basin_does_not_win():

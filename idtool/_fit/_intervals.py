@@ -37,9 +37,10 @@ _BISECTIONS = 6
 # A refit stops once its Gauss-Newton decrement is below this many residual variances,
 # the fit's own test of an optimum (_fit._DECREMENT_AT_OPTIMUM): its -2 log L rise is
 # then within 0.01 of the converged one, beside the 3.84 and 1 the checks compare it
-# with. LM's default 1e-8 lies below the loss's numerical floor on larger benches: on 48
-# traces every refit ran 63-83 steps until its damping gave up, for rises within 0.003
-# of those at 1e-2, reached in 0-24 steps (check_intervals 10.4 s -> 3.4 s).
+# with. With LM's default 1e-8, on 48 traces every refit ran 63-83 steps until its
+# damping gave up (a kink of the loss at the OFF switch, since rounded: _fit.py), for
+# rises within 0.003 of those at 1e-2, reached in 0-24 steps (check_intervals 10.4 s ->
+# 3.4 s).
 REFIT_TOL = 1e-2
 
 

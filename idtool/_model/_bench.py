@@ -136,5 +136,17 @@ def mean_force_n(
     drop_on = smooth_min(during, depth, corner_n)
     drop_end = smooth_min(slope_n_s * on_len, depth, corner_n)
     drop_after = smooth_max(drop_end - slope_n_s * (t - t_on - on_len), 0.0, corner_n)
-    drop = jnp.where(has_on, jnp.where(t < t_on + on_len, drop_on, drop_after), 0.0)
+    # The switch OFF is a corner too: the drop stops deepening and starts recovering, so
+    # the drop is the smaller of the two branches (they cross at t_on + on_len only). A
+    # plain switch between them left a corner in time at the OFF switch, and so a kink
+    # in the loss each time it crosses a sub-sample as the OFF delay moves, which no
+    # Levenberg-Marquardt step can settle on. Rounded over ``corner_n`` like the other
+    # corners, with the rounding's width fading within a few ``corner_n / slope_n_s``
+    # of the corner, so that far from it each branch is exact (a constant width would
+    # leave a tail of corner_n^2 / (4 depth) on the whole recovered level).
+    near = slope_n_s * (t - t_on - on_len) / corner_n
+    # (a floor of 1e-6 of the width keeps the square root's derivative finite)
+    fade = jnp.exp(-0.25 * near**2) + 1e-6
+    drop = smooth_min(drop_on, drop_after, corner_n * fade)
+    drop = jnp.where(has_on, drop, 0.0)
     return jnp.asarray(offset_n) + rise - drop
