@@ -29,6 +29,7 @@ def compile_variability(result: FitResult) -> None:
     args = (np.eye(n), np.zeros((n, 2)), np.zeros((n, n)))
     fit_sds.compile_ahead(np.zeros(3), np.zeros(3), r, g, *args)
     evaluate.compile_ahead(np.zeros((GRID, 3)), r, g, *args, True)
+    evaluate.compile_ahead(np.zeros((1, 3)), r, g, *args, False)  # at_sds: one row
 
 
 def with_variability(result: FitResult) -> FitResult:
