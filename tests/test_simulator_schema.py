@@ -107,10 +107,13 @@ def _shrunk(params: BenchParams) -> BenchParams:
 
 # sha256 of the datasets simulated (seed 7) before the simulator took its parts from the
 # registries (main at 3be9e74): the records and the model's actuator change no byte.
+# Pinned again after the slope actuator's OFF switch was rounded (issue 28, b094b07: the
+# bench model, and so the simulator, changed there), from the simulator without the
+# registries plus that change (branch lmconv, a6dae3d): the same three hashes as now.
 _BEFORE = {
-    "example": "481cb652d3eff226bba7e69cf3c0e88675898ea078876cda4820629c20db5e5c",
+    "example": "2205263afc823fa76d39de331588141321a5b7145f4f2ec08557fe014ee6e61a",
     "lag actuator": "3423257b91cabbf33b23845b3bcf9f44ff585e9f9ae100f9560a14ba036a7d2d",
-    "fading": "14f15ca089a61da1e37729c6e6a357643b8bb76a16b1c54a1544e9557ad5b938",
+    "fading": "c28bfbc4255cbf8f6e644ebbc0274c934ebc2f50434a5e081354e2dcfbffa68c",
 }
 
 
