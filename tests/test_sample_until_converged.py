@@ -16,6 +16,8 @@ import pytest
 import idtool
 from idtool._cli._main import main
 from idtool._data._example import example_dataset_path
+from idtool._data._schema import schema_validator
+from idtool._fit._folder import SAMPLE_JSON
 from idtool._posterior._chainfile import read_chain
 from idtool._posterior._diagnostics import RULE, diagnose
 from idtool._posterior._runner import FIRST_CHECK, ChainStore, run_chain
@@ -160,7 +162,13 @@ def sampled(default_fit, tmp_path_factory):
 def test_the_command_line_samples_until_converged_and_records_the_rule(sampled, tmp_path):
     folder, code = sampled
     assert code == 0
-    doc = json.loads((folder / "sample.json").read_text())["diagnostics"]
+    sample = json.loads((folder / "sample.json").read_text())
+    assert list(schema_validator(SAMPLE_JSON.schema).iter_errors(sample)) == []
+    assert sample["schema_version"] == SAMPLE_JSON.schema_version == "1"
+    assert sample["command"].startswith("idtool sample") and sample["versions"]["emcee"]
+    broken = dict(sample, diagnostics=dict(sample["diagnostics"], stopped_by="tired"))
+    assert list(schema_validator(SAMPLE_JSON.schema).iter_errors(broken))
+    doc = sample["diagnostics"]
     assert doc["converged"] and doc["stopped_by"] == "converged" and doc["rule"] == RULE
     assert all(p["ess_bulk"] >= 400 and p["rhat"] <= 1.01 for p in doc["parameters"].values())
     text = (folder / "report_sample.txt").read_text()
@@ -171,6 +179,7 @@ def test_the_command_line_samples_until_converged_and_records_the_rule(sampled, 
     argv = ["sample", str(bounded), "--seed", "2", "--no-progress", "-q", "--force"]
     assert main([*argv, "--max-steps", str(FIRST_CHECK)]) == 3
     sample = json.loads((bounded / "sample.json").read_text())
+    assert list(schema_validator(SAMPLE_JSON.schema).iter_errors(sample)) == []
     doc = sample["diagnostics"]
     assert not doc["converged"] and doc["stopped_by"] == "max_steps"
     # the verdict as a record, which the report's banner reads

@@ -12,6 +12,8 @@ import pytest
 
 import idtool
 from idtool._cli._main import main
+from idtool._data._schema import schema_validator
+from idtool._fit._folder import SAMPLE_JSON, VALIDATION_JSON
 
 
 def _dataset(seed: int):
@@ -49,6 +51,13 @@ def test_validate_fit_predicts_the_held_out_traces(held_out, capsys):
     assert main(["validate-fit", str(out)]) == 0
     printed = capsys.readouterr().out
     doc = json.loads((out / "validation.json").read_text())
+    # the published layout, with the run's provenance
+    assert list(schema_validator(VALIDATION_JSON.schema).iter_errors(doc)) == []
+    assert doc["schema_version"] == VALIDATION_JSON.schema_version == "1"
+    assert doc["seed"] == 0 and doc["command"].startswith("idtool validate-fit")
+    assert doc["versions"]["jax"] and len(doc["dataset_sha256"]) == 64
+    broken = dict(doc, traces=[dict(doc["traces"][0], inside="yes")])
+    assert list(schema_validator(VALIDATION_JSON.schema).iter_errors(broken))
     ids = [t["id"] for t in doc["traces"]]
     assert len(ids) == 4 and all(i.endswith("_T2.5") for i in ids)  # the held-out ones only
     for t in doc["traces"]:
@@ -114,3 +123,21 @@ def test_bad_selections_are_located(held_out, tmp_path, capsys):
     assert main(["fit", str(data), "--out", str(tmp_path / "f"), "--traces", "*,!*"]) == 2
     assert "leaves no trace" in capsys.readouterr().err
     assert not (tmp_path / "f").exists()
+
+
+def test_the_folders_json_documents_are_read_by_their_version(tmp_path):
+    """validation.json and sample.json as fit.json: none reads as version 1, a newer one
+    is refused naming the file and what to do, a broken one says to run the command."""
+    for entry in (VALIDATION_JSON, SAMPLE_JSON):
+        path = tmp_path / entry.name
+        path.write_text('{"traces": []}')
+        assert entry.read_json(tmp_path) == {"traces": []}  # before the field: version 1
+        path.write_text('{"schema_version": "9"}')
+        with pytest.raises(idtool.IdtoolError, match=rf"{entry.name}: schema version 9.*update"):
+            entry.read_json(tmp_path)
+        path.write_text('{"schema_version": ')
+        with pytest.raises(idtool.IdtoolError, match=rf"unreadable.*idtool {entry.command}"):
+            entry.read_json(tmp_path)
+        path.unlink()
+        with pytest.raises(idtool.IdtoolError, match="not found"):
+            entry.read_json(tmp_path)

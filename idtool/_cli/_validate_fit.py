@@ -10,6 +10,8 @@ import idtool
 from idtool._atomic import refuse_existing, write_text_atomic
 from idtool._cli._args import load_numerics
 from idtool._fit._folder import VALIDATION_JSON
+from idtool._provenance import provenance
+from idtool._version import __version__
 
 __all__ = ["VALIDATION_FILE", "register"]
 
@@ -23,7 +25,16 @@ def _run(args: argparse.Namespace) -> int:
     refuse_existing(out, args.force)
     fit = idtool.load_fit(args.fit)
     result = fit.validate(args.dataset, args.traces, seed=args.seed)
-    doc = result.to_dict()
+    prov = provenance(args.argv)
+    doc = {  # datasets_schema/validation.schema.json
+        "schema_version": VALIDATION_JSON.schema_version,
+        **result.to_dict(),
+        "seed": args.seed,
+        "idtool_version": __version__,
+        "command": prov["command"],
+        "versions": prov["versions"],
+        "created_utc": prov["created_utc"],
+    }
     write_text_atomic(out, json.dumps(doc, indent=1) + "\n")
     if args.json:
         print(json.dumps(doc, indent=1))

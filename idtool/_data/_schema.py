@@ -24,8 +24,10 @@ from idtool._errors import Problem
 __all__ = [
     "DATASET_SCHEMA",
     "FIT_SCHEMA",
+    "SAMPLE_SCHEMA",
     "SIMULATOR_PARAMS_SCHEMA",
     "TRACE_TABLE_SCHEMA",
+    "VALIDATION_SCHEMA",
     "closest_name",
     "json_path",
     "load_schema",
@@ -38,7 +40,16 @@ DATASET_SCHEMA = "dataset.schema.json"
 TRACE_TABLE_SCHEMA = "trace_table.schema.json"
 SIMULATOR_PARAMS_SCHEMA = "simulator_params.schema.json"
 FIT_SCHEMA = "fit.schema.json"  # fit.json (idtool._fit._folder.FIT_JSON)
-_ALL = (DATASET_SCHEMA, TRACE_TABLE_SCHEMA, SIMULATOR_PARAMS_SCHEMA, FIT_SCHEMA)
+SAMPLE_SCHEMA = "sample.schema.json"  # sample.json (idtool._fit._folder.SAMPLE_JSON)
+VALIDATION_SCHEMA = "validation.schema.json"  # validation.json (_folder.VALIDATION_JSON)
+_ALL = (
+    DATASET_SCHEMA,
+    TRACE_TABLE_SCHEMA,
+    SIMULATOR_PARAMS_SCHEMA,
+    FIT_SCHEMA,
+    SAMPLE_SCHEMA,
+    VALIDATION_SCHEMA,
+)
 
 
 def _schema_text(name: str) -> str:

@@ -13,6 +13,11 @@ and read by :mod:`idtool._fit._artefact` (``fit.json``, ``report.txt``,
 from __future__ import annotations
 
 import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+from idtool._errors import IdtoolError
 
 __all__ = [
     "CHAIN_H5",
@@ -28,8 +33,10 @@ __all__ = [
     "REPORT_TXT",
     "RESIDUALS_PNG",
     "SAMPLE_JSON",
+    "SAMPLE_SCHEMA_VERSION",
     "TRACES_PNG",
     "VALIDATION_JSON",
+    "VALIDATION_SCHEMA_VERSION",
     "FolderFile",
     "law_state_file",
 ]
@@ -38,6 +45,10 @@ __all__ = [
 # fields, the optional ones absent); "2": with ``schema_version``, and fit_state.npz with
 # the multi-start's optima on the internal scale.
 FIT_SCHEMA_VERSION = "2"
+# sample.json's and validation.json's layouts: "1" (a file without the field, written
+# before it, has the same fields and reads as version 1).
+SAMPLE_SCHEMA_VERSION = "1"
+VALIDATION_SCHEMA_VERSION = "1"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -67,6 +78,34 @@ class FolderFile:
     def for_law(self, law: str) -> str:
         """The name of the file of the coupling law ``law``."""
         return self.name.format(law=law)
+
+    def read_json(self, folder: Path) -> dict[str, Any]:
+        """This JSON document of ``folder``, its ``schema_version`` checked: none (a
+        file written before the field) reads as version 1; a newer version than this
+        idtool's is refused with an :class:`~idtool._errors.IdtoolError` naming the
+        file and what to do, as is a missing or unreadable file."""
+        path = Path(folder) / self.name
+        if not path.is_file():
+            raise IdtoolError(
+                f"{path}: not found; is {folder} a fit folder, and has 'idtool "
+                f"{self.command}' run on it?"
+            )
+        try:
+            doc = json.loads(path.read_text())
+        except (ValueError, OSError) as err:
+            raise IdtoolError(
+                f"{path}: unreadable ({err}); run 'idtool {self.command}' again"
+            ) from None
+        if not isinstance(doc, dict):
+            raise IdtoolError(f"{path}: not a JSON object; run 'idtool {self.command}' again")
+        version = str(doc.get("schema_version", "1"))
+        newest = self.schema_version or "1"
+        if not version.isdigit() or int(version) > int(newest):
+            raise IdtoolError(
+                f"{path}: schema version {version}, this idtool reads versions 1 to "
+                f"{newest}; update idtool (or run 'idtool {self.command}' again with this one)"
+            )
+        return doc
 
 
 _STORE = "idtool._fit._store"
@@ -116,6 +155,8 @@ VALIDATION_JSON = FolderFile(
     "held-out traces: force fit %, RMSE, FR against its band",
     "idtool._cli._validate_fit:_run",
     "idtool._report._html_validation:validation_section",
+    VALIDATION_SCHEMA_VERSION,
+    "validation.schema.json",
 )
 CHAIN_H5 = FolderFile(
     "chain.h5",
@@ -132,7 +173,13 @@ POSTERIOR_NC = FolderFile(
     "idtool._posterior._store:load_posterior",
 )
 SAMPLE_JSON = FolderFile(
-    "sample.json", "sample", "convergence diagnostics, priors, posterior predictive check", _SAMPLE
+    "sample.json",
+    "sample",
+    "convergence diagnostics, priors, posterior predictive check",
+    _SAMPLE,
+    "",
+    SAMPLE_SCHEMA_VERSION,
+    "sample.schema.json",
 )
 REPORT_SAMPLE_TXT = FolderFile(
     "report_sample.txt", "sample", "the printed posterior report", _SAMPLE

@@ -22,27 +22,18 @@ from idtool._data._blocks import prepare_fit_data
 from idtool._data._dataset import load_dataset
 from idtool._errors import IdtoolError
 from idtool._fit._artefact import FitArtefact, fit_artefact
-from idtool._fit._folder import FIT_JSON, FIT_SCHEMA_VERSION, FIT_STATE, REPORT_TXT
+from idtool._fit._folder import FIT_JSON, FIT_STATE, REPORT_TXT
 
 __all__ = ["load_artefact", "read_fit_doc", "read_states", "write_artefact"]
 
 
 def read_fit_doc(folder: Path) -> dict[str, Any]:
     """``fit.json`` of ``folder``, its schema version checked (none: version 1)."""
-    path = folder / FIT_JSON.name
-    if not path.is_file():
-        raise IdtoolError(f"{path}: not found; is {folder} the output of 'idtool fit'?")
-    try:
-        doc = json.loads(path.read_text())
-    except (ValueError, OSError) as err:
-        raise IdtoolError(f"{path}: unreadable fit ({err}); run 'idtool fit' again") from None
-    version = str(doc.get("schema_version", "1"))
-    if not version.isdigit() or int(version) > int(FIT_SCHEMA_VERSION):
+    if not (folder / FIT_JSON.name).is_file():
         raise IdtoolError(
-            f"{path}: schema version {version}, this idtool reads versions 1 to "
-            f"{FIT_SCHEMA_VERSION}; update idtool (or fit again with this one)"
+            f"{folder / FIT_JSON.name}: not found; is {folder} the output of 'idtool fit'?"
         )
-    return doc
+    return FIT_JSON.read_json(folder)
 
 
 def write_artefact(folder: Path, artefact: FitArtefact) -> None:

@@ -5,7 +5,6 @@ more often than chance explains."""
 from __future__ import annotations
 
 import html
-import json
 from pathlib import Path
 
 from idtool._fit._folder import VALIDATION_JSON
@@ -17,10 +16,9 @@ __all__ = ["validation_banner", "validation_section"]
 def validation_banner(folder: Path) -> str:
     """A banner when held-out traces fall outside their 95% bands more often than
     chance explains: fewer inside than the 2.5% quantile of Binomial(n, 0.95)."""
-    path = folder / VALIDATION_JSON.name
-    if not path.is_file():
+    if not (folder / VALIDATION_JSON.name).is_file():
         return ""
-    v = json.loads(path.read_text())
+    v = VALIDATION_JSON.read_json(folder)
     inside = [t["inside"] for t in v["traces"] if t["inside"] is not None]
     n, k = len(inside), sum(inside)
     # P(at most k inside | n, 0.95): a lower tail under 2.5% is more than bad luck
@@ -38,13 +36,12 @@ def validation_banner(folder: Path) -> str:
 
 def validation_section(folder: Path) -> str:
     """``validation.json`` (``idtool validate-fit``) as a table, or what to run."""
-    path = folder / VALIDATION_JSON.name
-    if not path.is_file():
+    if not (folder / VALIDATION_JSON.name).is_file():
         return (
             "<p>No held-out validation yet: fit some traces (idtool fit --traces) and run "
             "idtool validate-fit on the others, or on another session's dataset.</p>"
         )
-    v = json.loads(path.read_text())
+    v = VALIDATION_JSON.read_json(folder)
     rows = []
     for t in v["traces"]:
         own = t["friction_ratio"]

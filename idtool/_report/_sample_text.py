@@ -144,6 +144,7 @@ def write_posterior_outputs(
     report = sample_report(post, estimates, check, str(folder), shrink)
     prov = provenance(command)
     doc = {
+        "schema_version": SAMPLE_JSON.schema_version,  # datasets_schema/sample.schema.json
         "posterior": post.summary(),
         "noise": post.noise,
         "priors": {n: p.to_dict() for n, p in post.priors.items()},
