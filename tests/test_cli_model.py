@@ -134,6 +134,23 @@ print(session, console > 100_000, gc.get_freeze_count() == console)
     assert out.stdout.split() == ["0", "True", "True"]
 
 
+@pytest.mark.parametrize("console", [False, True])
+def test_a_console_process_collects_no_garbage_while_it_imports(console):
+    """In the console script's process the collector is off during ``load_numerics``'s
+    imports (and on again after); a Python session's collector runs as it would."""
+    code = f"""
+import gc
+from idtool._cli import _args
+runs = []
+gc.callbacks.append(lambda phase, info: phase == "start" and runs.append(info["generation"]))
+_args.freeze_on_load = {console}
+_args.load_numerics()
+print(len(runs) > 0, gc.isenabled())
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == [str(not console), "True"]
+
+
 @pytest.mark.parametrize("given, expected", [(None, "1"), ("2", "2")])
 def test_the_console_script_sets_one_openblas_thread_before_numpy_loads(given, expected):
     """OpenBLAS reads ``OPENBLAS_NUM_THREADS`` once, when NumPy loads it: the console
