@@ -177,3 +177,13 @@ def test_the_command_line_keeps_the_programs_beside_its_compilation_cache(tmp_pa
         [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
     )
     assert out.stdout.strip() == str(tmp_path / "jax" / SUBFOLDER)
+
+
+def test_a_program_without_compiler_options_compiles_quickly():
+    """XLA's options default to QUICK_COMPILE (fusion emitters off, LLVM at -O1), in the
+    jitted fallback and in the key alike; options given are kept as given."""
+    quick = Program(line_at)
+    assert quick._options == {"compiler_options": _compiled.QUICK_COMPILE}
+    assert quick.jitted._jit_info.compiler_options_kvs == tuple(_compiled.QUICK_COMPILE.items())
+    given = {"xla_backend_optimization_level": 0}
+    assert Program(line_at, compiler_options=given)._options == {"compiler_options": given}

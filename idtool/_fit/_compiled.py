@@ -52,6 +52,7 @@ import jaxlib
 from equinox._module import _flatten as eqx_flatten
 
 __all__ = [
+    "QUICK_COMPILE",
     "SUBFOLDER",
     "Program",
     "program",
@@ -64,6 +65,13 @@ __all__ = [
 _log = logging.getLogger(__name__)
 
 SUBFOLDER = "idtool-programs"  # inside JAX's compilation cache folder
+
+# XLA's options for a program whose decorator gives none. XLA:CPU's default (fusion
+# emitters, LLVM at -O2) compiled the levels model's REML programs in 1.5-4.2 s each
+# (fit_sds, evaluate; 2 cores, load 8), these in 0.2-0.4 s; the fit's numbers moved by
+# one rounding (REML's log-likelihood, 1.6e-16 relative). The Levenberg-Marquardt
+# program chose the same (idtool._fit._program).
+QUICK_COMPILE = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 1}
 _FORMAT = 1  # of the files; bumped when what they hold changes
 
 
@@ -163,9 +171,11 @@ class Program:
     structure and abstract values. ``fn`` takes no static arguments (a static value
     belongs in a pytree's static fields, whose repr is part of the key: it must show
     the whole value, as equinox's static fields and dataclasses do; a label no program
-    computes with may say so, :func:`structure_text`)."""
+    computes with may say so, :func:`structure_text`). Without ``compiler_options``,
+    XLA's are :data:`QUICK_COMPILE`."""
 
     def __init__(self, fn: Callable[..., Any], **jit_options: Any):
+        jit_options.setdefault("compiler_options", QUICK_COMPILE)
         self.jitted: Any = jax.jit(fn, **jit_options)
         self._fn = fn
         self._options = jit_options
@@ -290,5 +300,6 @@ class _Pickler(pickle.Pickler):
 
 def program(**jit_options: Any) -> Callable[[Callable[..., Any]], Program]:
     """Decorator: ``@program(compiler_options=...)`` in place of
-    ``@functools.partial(jax.jit, compiler_options=...)`` (:class:`Program`)."""
+    ``@functools.partial(jax.jit, compiler_options=...)`` (:class:`Program`; without
+    ``compiler_options``, :data:`QUICK_COMPILE`)."""
     return functools.partial(Program, **jit_options)
