@@ -118,6 +118,7 @@ def _environment() -> str:
     )
 
 
+@functools.lru_cache(maxsize=256)
 def structure_text(tree: Any) -> str:
     """The tree structure ``tree`` as text for a program's key: node types, their static
     data and children, as ``str(tree)`` shows them, except that a static value whose
@@ -129,7 +130,10 @@ def structure_text(tree: Any) -> str:
     first, and with it keyed here by its string, so does the folder. Keyed by its
     repr, a new dataset's programs were traced and kept again. A program's output must
     hold no label (as for ``jax.jit``, whose cache would give the first call's):
-    one that does is not kept on disk."""
+    one that does is not kept on disk.
+
+    Kept per tree structure (equal structures give equal texts: ~1 ms a call, 46 calls
+    in a fit of the example)."""
     return _text(tree, [])
 
 
