@@ -25,6 +25,21 @@ compiles the fit's large programs. Cold empties both.
 
     python benchmarks/bench_first_result.py [--repeat 3]
 
+The run does what the console script does first (one OpenBLAS thread,
+``idtool._cli._main.single_threaded_blas``) and imports matplotlib in a thread while
+the fit runs (``idtool._plotting.import_in_background``), as ``idtool fit`` does.
+
+Measured 2026-11-25 on 2 cores shared with three other sessions (load average 7-8:
+wall times are 1.5-2x what an idle machine gives; CPU time is the steadier figure),
+main at 63ad8a2 -> branch latency2:
+
+    warm  wall 6.6 -> 7.3 s (load), CPU 4.47 -> 4.10 s
+    cold  wall 27.2 -> 26.3 s (load), CPU 18.4 -> 14.2 s
+
+and ``idtool fit`` itself (5 fresh processes each, alternating, load 5-7): warm wall
+median 10.4 -> 7.9 s, user CPU median 5.6 -> 4.0 s; cold user CPU 19.4-20.7 -> 13.0 s.
+At the load of the last session (1.3-1.8) warm was 3.7-4.3 s and cold 13.2 s wall.
+
 There is no SciPy side to this one: it breaks down idtool's own time to a first result
 (``bench_fit.py`` compares the fit with a SciPy implementation).
 """
@@ -45,6 +60,8 @@ RUN = r"""
 import time
 t0 = time.perf_counter()
 import collections, json, sys
+from idtool._cli._main import single_threaded_blas
+single_threaded_blas()  # as the console script, before NumPy loads
 import jax
 phases = collections.OrderedDict()
 jax_events = collections.Counter()
@@ -73,11 +90,14 @@ mark("import")
 ds = idtool.load_dataset(idtool.example_dataset_path())
 mark("load")
 jax_events.clear()
+from idtool._plotting import import_in_background
+drawing = import_in_background()  # as idtool fit: matplotlib while the fit runs
 fit = idtool.fit(ds, seed=0)
 mark("fit")
 fit_jax = dict(jax_events)
 text = fit.report()
 mark("report")
+drawing.join()
 fit.save(sys.argv[1], force=True, command=["fit"])
 mark("save")
 json.dump({"phases": phases, "jax_in_fit": fit_jax,
@@ -88,6 +108,9 @@ json.dump({"phases": phases, "jax_in_fit": fit_jax,
 def run_once(cache: str, out: Path) -> dict:
     result = out.with_suffix(".json")
     env = os.environ | {"IDTOOL_CACHE_DIR": cache, "MPLBACKEND": "Agg"}
+    # An installed idtool has its byte code compiled: without it ~100 modules were
+    # compiled from source in every run (0.2-0.35 s)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     t0, c0 = time.perf_counter(), os.times()
     subprocess.run([sys.executable, "-c", RUN, str(out), str(result)], env=env, check=True)
     c1 = os.times()

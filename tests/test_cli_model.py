@@ -1,6 +1,7 @@
 """``idtool curve`` and ``idtool seed-study`` through the command line."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -131,3 +132,63 @@ print(session, console > 100_000, gc.get_freeze_count() == console)
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["0", "True", "True"]
+
+
+@pytest.mark.parametrize("console", [False, True])
+def test_a_console_process_collects_no_garbage_while_it_imports(console):
+    """In the console script's process the collector is off during ``load_numerics``'s
+    imports (and on again after); a Python session's collector runs as it would."""
+    code = f"""
+import gc
+from idtool._cli import _args
+runs = []
+gc.callbacks.append(lambda phase, info: phase == "start" and runs.append(info["generation"]))
+_args.freeze_on_load = {console}
+_args.load_numerics()
+print(len(runs) > 0, gc.isenabled())
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == [str(not console), "True"]
+
+
+@pytest.mark.parametrize("given, expected", [(None, "1"), ("2", "2")])
+def test_the_console_script_sets_one_openblas_thread_before_numpy_loads(given, expected):
+    """OpenBLAS reads ``OPENBLAS_NUM_THREADS`` once, when NumPy loads it: the console
+    script sets it first (one thread, ``idtool._cli._main.single_threaded_blas``),
+    unless the environment gives it."""
+    code = """
+import os, sys
+from idtool._cli import _main
+seen = []
+real = _main.single_threaded_blas
+def spy():
+    seen.append("numpy" in sys.modules)
+    real()
+_main.single_threaded_blas = spy
+sys.argv = ["idtool", "curve", "--vr", "0.5", "--json"]
+_main.console()
+import numpy
+print(seen, os.environ["OPENBLAS_NUM_THREADS"], file=sys.stderr)
+"""
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if given is not None:
+        env["OPENBLAS_NUM_THREADS"] = given
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
+    )
+    assert proc.stderr.split() == ["[False]", expected]
+
+
+def test_the_figures_modules_import_in_a_background_thread():
+    """``idtool fit`` imports matplotlib while it fits (``import_in_background``): the
+    thread imports every module a figure's drawing and saving needs."""
+    code = """
+import sys
+from idtool._plotting import MODULES, import_in_background
+assert not any(m in sys.modules for m in MODULES)
+thread = import_in_background()
+thread.join()
+print(thread.daemon, all(m in sys.modules for m in MODULES))
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["True", "True"]

@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from idtool._data._blocks import DataLabels
 from idtool._fit import _compiled
 from idtool._fit._compiled import SUBFOLDER, Program
 
@@ -62,6 +63,51 @@ def test_a_fresh_program_loads_the_kept_one_without_tracing(folder):
     Program(line_at)(Line(jnp.array([1.0, 2.0]), "b"), np.ones(2), 0.5)
     assert TRACES == ["a", "a", "b"]
     assert len(list(folder.glob("line_at-*.bin"))) == 3
+
+
+class Labelled(eqx.Module):
+    """An array and a dataset's labels (static: names no program computes with)."""
+
+    x: jax.Array
+    labels: DataLabels = eqx.field(static=True)
+
+
+def _labels(name: str) -> DataLabels:
+    return DataLabels(name, "0" * 64, (f"{name}_1", f"{name}_2"), 2, "rig", 0.0, ())
+
+
+def scaled(data: Labelled, k):
+    TRACES.append(data.labels.name)
+    return data.x * k
+
+
+def passed_on(data: Labelled):
+    TRACES.append(data.labels.name)
+    return Labelled(data.x * 2.0, data.labels)
+
+
+def test_another_dataset_of_the_same_shape_loads_the_kept_program(folder):
+    """A dataset's name and trace ids (DataLabels) are not in the key: a second
+    dataset of the same shape, in a fresh process, neither traces nor keeps another."""
+    first = Program(scaled)(Labelled(jnp.array([1.0, 2.0]), _labels("first")), 3.0)
+    out = Program(scaled)(Labelled(jnp.array([5.0, 6.0]), _labels("second")), 3.0)
+    assert TRACES == ["first"]
+    assert len(list(folder.glob("scaled-*.bin"))) == 1
+    np.testing.assert_array_equal(first, [3.0, 6.0])
+    np.testing.assert_array_equal(out, [15.0, 18.0])
+    a, b = (jax.tree.structure(Labelled(jnp.zeros(2), _labels(name))) for name in ("a", "b"))
+    assert str(a) != str(b) and _compiled.structure_text(a) == _compiled.structure_text(b)
+    # the rest of the static data is still keyed
+    Program(scaled)(Labelled(jnp.array([1.0, 2.0, 3.0]), _labels("third")), 3.0)
+    assert TRACES == ["first", "third"]
+
+
+def test_a_program_whose_output_holds_labels_is_not_kept(folder):
+    """Its output tree would give the first dataset's labels to the next one."""
+    out = Program(passed_on)(Labelled(jnp.array([1.0, 2.0]), _labels("first")))
+    assert out.labels.name == "first"
+    np.testing.assert_array_equal(out.x, [2.0, 4.0])
+    assert not list(folder.glob("passed_on-*.bin"))
 
 
 def test_a_changed_source_traces_again(folder, monkeypatch):
@@ -131,3 +177,13 @@ def test_the_command_line_keeps_the_programs_beside_its_compilation_cache(tmp_pa
         [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
     )
     assert out.stdout.strip() == str(tmp_path / "jax" / SUBFOLDER)
+
+
+def test_a_program_without_compiler_options_compiles_quickly():
+    """XLA's options default to QUICK_COMPILE (fusion emitters off, LLVM at -O1), in the
+    jitted fallback and in the key alike; options given are kept as given."""
+    quick = Program(line_at)
+    assert quick._options == {"compiler_options": _compiled.QUICK_COMPILE}
+    assert quick.jitted._jit_info.compiler_options_kvs == tuple(_compiled.QUICK_COMPILE.items())
+    given = {"xla_backend_optimization_level": 0}
+    assert Program(line_at, compiler_options=given)._options == {"compiler_options": given}

@@ -30,13 +30,22 @@ def load_numerics() -> None:
     until the process ends anyway): 0.55 s of collections in a warm ``idtool fit``,
     0.2 s with them frozen. Only there, and once: frozen objects that later become
     cyclic garbage are never collected, which a process of one command can afford and
-    a Python session calling :func:`~idtool._cli._main.main` (tests, notebooks) cannot."""
+    a Python session calling :func:`~idtool._cli._main.main` (tests, notebooks) cannot.
+    There the collector is also off during the imports, which leave next to no cyclic
+    garbage: their two full collections and dozens of young ones took 0.2-0.3 s of a
+    warm ``idtool fit`` (2 cores, load 7)."""
     global freeze_on_load
     import gc
 
-    import idtool._entry
-    import idtool._workflow  # noqa: F401
-
+    freezing = freeze_on_load and gc.isenabled()
+    if freezing:
+        gc.disable()
+    try:
+        import idtool._entry
+        import idtool._workflow  # noqa: F401
+    finally:
+        if freezing:
+            gc.enable()
     if freeze_on_load:
         freeze_on_load = False
         gc.freeze()

@@ -12,6 +12,7 @@ import idtool
 from idtool._atomic import refuse_existing
 from idtool._cli._args import add_law_argument, load_numerics, registry_names
 from idtool._model._names import BY_DESIGN, DEFAULT_NOISE
+from idtool._plotting import import_in_background
 
 __all__ = ["register"]
 
@@ -24,6 +25,8 @@ def _run(args: argparse.Namespace) -> int:
     dataset = idtool.load_dataset(Path(args.dataset))
     for w in dataset.warnings:  # on stderr: stdout may be the --json document
         print(f"idtool fit: {w}", file=sys.stderr)
+    # matplotlib's imports while the fit waits for XLA (fit.save draws two figures)
+    drawing = import_in_background()
     fit = idtool.fit(
         dataset,
         law=args.law,
@@ -43,6 +46,7 @@ def _run(args: argparse.Namespace) -> int:
         parameters=args.parameters,
         fix=_fixed(args.fix),
     )
+    drawing.join()  # fit.save draws: its imports done, not raced
     fit.save(args.out, force=args.force, command=args.argv)
     if args.json:  # fit.json as written, for scripts (the report is in report.txt)
         print(json.dumps(fit.to_json(), indent=1))

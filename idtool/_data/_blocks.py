@@ -15,6 +15,7 @@ asked for, that is a whole number of samples at every trace's sample rate (3 per
 from __future__ import annotations
 
 import dataclasses
+from typing import ClassVar
 
 import equinox as eqx
 import numpy as np
@@ -164,8 +165,12 @@ class DataLabels:
     key a jitted call on its arguments' static fields, so with the names static a
     second dataset of the same shape (the next bench, the next seed of a study) was
     traced, lowered and compiled again (~1.7 s a Levenberg-Marquardt program); with
-    them here, its programs are the first one's.
+    them here, its programs are the first one's; so also in the fit's programs kept on
+    disk, whose key shows it as :attr:`program_key`
+    (:func:`idtool._fit._compiled.structure_text`).
     """
+
+    program_key: ClassVar[str] = "DataLabels"
 
     name: str
     sha256: str

@@ -7,7 +7,8 @@ by the lowered module, so every process traced again. Here each program is expor
 (``jax.export``: its StableHLO, serialised) under a key computed without tracing: a hash
 of idtool's source files, the JAX and jaxlib versions, the backend, 64-bit mode and
 XLA_FLAGS, the program's name and JIT options, and the arguments' tree structure
-(static fields included) and abstract values (shape, dtype, weak type). A fresh process
+(static fields included, but for labels: :func:`structure_text`) and abstract values
+(shape, dtype, weak type). A fresh process
 deserialises it (milliseconds), lowers the call to it and finds the executable in JAX's
 persistent cache as before.
 
@@ -50,11 +51,27 @@ import jax
 import jaxlib
 from equinox._module import _flatten as eqx_flatten
 
-__all__ = ["SUBFOLDER", "Program", "program", "program_folder", "source_hash", "tree_hash"]
+__all__ = [
+    "QUICK_COMPILE",
+    "SUBFOLDER",
+    "Program",
+    "program",
+    "program_folder",
+    "source_hash",
+    "structure_text",
+    "tree_hash",
+]
 
 _log = logging.getLogger(__name__)
 
 SUBFOLDER = "idtool-programs"  # inside JAX's compilation cache folder
+
+# XLA's options for a program whose decorator gives none. XLA:CPU's default (fusion
+# emitters, LLVM at -O2) compiled the levels model's REML programs in 1.5-4.2 s each
+# (fit_sds, evaluate; 2 cores, load 8), these in 0.2-0.4 s; the fit's numbers moved by
+# one rounding (REML's log-likelihood, 1.6e-16 relative). The Levenberg-Marquardt
+# program chose the same (idtool._fit._program).
+QUICK_COMPILE = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 1}
 _FORMAT = 1  # of the files; bumped when what they hold changes
 
 
@@ -101,14 +118,68 @@ def _environment() -> str:
     )
 
 
+@functools.lru_cache(maxsize=256)
+def structure_text(tree: Any) -> str:
+    """The tree structure ``tree`` as text for a program's key: node types, their static
+    data and children, as ``str(tree)`` shows them, except that a static value whose
+    class sets ``program_key`` (a string) shows as that string.
+
+    Such a value is a label that no program computes with and that every instance of
+    its class equals (:class:`idtool._data._blocks.DataLabels`: a dataset's name and
+    trace ids): JAX's caches then take a second dataset of the same shape for the
+    first, and with it keyed here by its string, so does the folder. Keyed by its
+    repr, a new dataset's programs were traced and kept again. A program's output must
+    hold no label (as for ``jax.jit``, whose cache would give the first call's):
+    one that does is not kept on disk.
+
+    Kept per tree structure (equal structures give equal texts: ~1 ms a call, 46 calls
+    in a fit of the example)."""
+    return _text(tree, [])
+
+
+def _text(tree: Any, labels: list[str]) -> str:
+    """:func:`structure_text`, appending the labels met to ``labels``."""
+    data = tree.node_data()
+    if data is None:
+        return "*"
+    kind, aux = data
+    children = ", ".join(_text(child, labels) for child in tree.children())
+    return f"{kind.__module__}.{kind.__qualname__}[{_static_text(aux, labels)}]({children})"
+
+
+def _static_text(value: Any, labels: list[str]) -> str:
+    """``repr(value)``, with :func:`structure_text`'s labels as their ``program_key``."""
+    label = getattr(type(value), "program_key", None)
+    if isinstance(label, str):
+        labels.append(label)
+        return label
+    if isinstance(value, tuple | list):
+        inner = ", ".join(_static_text(v, labels) for v in value)
+        return f"({inner},)" if isinstance(value, tuple) else f"[{inner}]"
+    if isinstance(value, dict):
+        items = (f"{k!r}: {_static_text(v, labels)}" for k, v in value.items())
+        return "{" + ", ".join(items) + "}"
+    return repr(value)
+
+
+def _has_label(tree: Any) -> bool:
+    """Whether a static value of ``tree`` is a label (:func:`structure_text`)."""
+    labels: list[str] = []
+    _text(tree, labels)
+    return bool(labels)
+
+
 class Program:
     """``jax.jit(fn, **jit_options)`` whose executables are kept on disk
     (:func:`program_folder`, module docstring) and in memory, by the arguments' tree
     structure and abstract values. ``fn`` takes no static arguments (a static value
     belongs in a pytree's static fields, whose repr is part of the key: it must show
-    the whole value, as equinox's static fields and dataclasses do)."""
+    the whole value, as equinox's static fields and dataclasses do; a label no program
+    computes with may say so, :func:`structure_text`). Without ``compiler_options``,
+    XLA's are :data:`QUICK_COMPILE`."""
 
     def __init__(self, fn: Callable[..., Any], **jit_options: Any):
+        jit_options.setdefault("compiler_options", QUICK_COMPILE)
         self.jitted: Any = jax.jit(fn, **jit_options)
         self._fn = fn
         self._options = jit_options
@@ -143,7 +214,7 @@ class Program:
     def key(self, leaves: list[Any], tree: Any) -> str:
         """The key of the executable for arguments ``tree.unflatten(leaves)``."""
         avals = [str(jax.typeof(x)) for x in leaves]
-        text = repr((_environment(), self._name, self._options, str(tree), avals))
+        text = repr((_environment(), self._name, self._options, structure_text(tree), avals))
         return hashlib.sha256(text.encode()).hexdigest()
 
     def _executable(self, folder: Path, leaves: list[Any], tree: Any) -> tuple[Any, Any]:
@@ -178,6 +249,9 @@ class Program:
         except Exception:  # not exportable (a host callback): compiled, not kept
             _log.info("could not export %s", self._name, exc_info=True)
             return jax.jit(flat, **self._options).lower(*leaves).compile(), out_tree[-1]
+        if _has_label(out_tree[-1]):  # another dataset's call would get these labels
+            _log.info("not keeping %s: its output holds a label", self._name)
+            return self._compiled(exported, leaves), out_tree[-1]
         try:
             with io.BytesIO() as buffer:
                 _Pickler(buffer).dump((bytes(exported.serialize()), out_tree[-1]))
@@ -230,5 +304,6 @@ class _Pickler(pickle.Pickler):
 
 def program(**jit_options: Any) -> Callable[[Callable[..., Any]], Program]:
     """Decorator: ``@program(compiler_options=...)`` in place of
-    ``@functools.partial(jax.jit, compiler_options=...)`` (:class:`Program`)."""
+    ``@functools.partial(jax.jit, compiler_options=...)`` (:class:`Program`; without
+    ``compiler_options``, :data:`QUICK_COMPILE`)."""
     return functools.partial(Program, **jit_options)
