@@ -1,0 +1,241 @@
+"""Walkers spread along a parameter the data barely bound (issue 26).
+
+The friction ratio depends on Kt only through ``Lambda = Kt a / (mu N)`` (notes §4), and
+at one pull speed the slip amplitude ``a`` is tied across loads and amplitudes by the
+coupling law alone (:func:`idtool._fit._run.kt_through_coupling`). On a bench whose
+coupling law the fit does not ship, the levels posterior along Kt is two plateaus, the
+creep limit (Kt below 1e7 N/m, ``Lambda -> 0``) and the Coulomb limit (above 3e9), each
+with its own coupling gain (0.048 and 0.019: the two limits' amplitudes differ by
+``pi^2 / 4``), joined through a valley 5-7 lower in log-posterior. Walkers started around
+the fit's optimum all sit on one plateau; the differential-evolution moves, scaled for
+steps within a mode, never cross to the other (32 x 2400 steps on the "ceiling" bench,
+seed 901: every walker below 1.2e7 N/m, the posterior "converged" with Kt's interval
+excluding its truth, 1.4e9).
+
+So where the fit's 95% interval of a physical log-scale parameter spans more than
+:data:`RIDGE_DECADES` (or it sits at a bound), the start profiles the log-posterior along
+it (every other parameter maximised, :func:`ridge_profile`) over its whole internal range
+and places the walkers on that profile in proportion to its density
+(:func:`ridge_walkers`), so every mode starts populated; the sampler's mode-hopping move
+(:func:`idtool._posterior._sample._levels_moves`) then carries walkers between them. The
+same profile, with the parameter's own prior taken out, says which sides the data bound
+(:func:`open_sides`, the fit's rule: :func:`idtool._fit._result.one_sided`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array
+
+from idtool._fit._result import Z95, Z_AT_BOUND, one_sided
+from idtool._model._params import Param
+
+__all__ = [
+    "RIDGE_DECADES",
+    "RIDGE_POINTS",
+    "Ridge",
+    "RidgeTarget",
+    "open_sides",
+    "ridge_profile",
+    "ridge_walkers",
+    "weak_parameter",
+]
+
+# A log-scale parameter whose Wald 95% interval spans more decades than this is profiled:
+# the issue's bound on a useful interval (two decades).
+RIDGE_DECADES = 2.0
+# Profile points over the internal range [-Z_AT_BOUND, Z_AT_BOUND] (one internal unit
+# apart: the valley between Kt's plateaus is about one wide).
+RIDGE_POINTS = 15
+_CHI2_95 = 3.84  # -2 log L rise at a 95% interval's end, one parameter (as the fit's)
+
+
+@dataclasses.dataclass(frozen=True)
+class Ridge:
+    """The log-posterior profiled along parameter ``index`` (internal scale).
+
+    ``grid`` (points,) the parameter's internal values; ``theta`` (points, ndim) the
+    maximising vectors; ``log_post`` the log-posterior there (internal scale: prior and
+    Jacobian included); ``log_lik`` the same without the parameter's own prior and
+    Jacobian (what the data say about it)."""
+
+    index: int
+    grid: np.ndarray
+    theta: np.ndarray
+    log_post: np.ndarray
+    log_lik: np.ndarray
+
+
+def weak_parameter(
+    params: tuple[Param, ...], z: np.ndarray, cov: np.ndarray, n_physical: int
+) -> int | None:
+    """The physical log-scale parameter whose Wald 95% interval (internal ``z`` +- 1.96
+    sd, through the transform as the fit's, :func:`idtool._fit._result.estimate_of`)
+    spans the most decades, if more than :data:`RIDGE_DECADES`; at a bound of its range
+    (beyond :data:`Z_AT_BOUND`) counts as unbounded. None when every one is narrower."""
+    best, widest = None, RIDGE_DECADES
+    for i, p in enumerate(params[:n_physical]):
+        if p.kind != "log":
+            continue
+        sd = float(np.sqrt(max(cov[i, i], 0.0)))
+        if abs(z[i]) > Z_AT_BOUND:
+            decades = math.log10(p.hi / p.lo)
+        else:
+            lo, hi = (float(p.value(float(z[i] + s * Z95 * sd))) for s in (-1.0, 1.0))
+            decades = math.log10(hi / lo)
+        if decades > widest:
+            best, widest = i, decades
+    return best
+
+
+@eqx.filter_jit
+def _maximise_others(theta, i, zi, target):
+    """``theta`` with its ``i``-th entry held at ``zi`` and the others maximising
+    ``target``'s log-posterior (optimistix's BFGS; a -inf step is rejected by its line
+    search)."""
+
+    def log_post(x):
+        return target.log_posterior_batch(x[None])[0]
+
+    def loss(x, _):
+        return -log_post(x.at[i].set(zi))
+
+    sol: optx.Solution = optx.minimise(
+        loss, optx.BFGS(rtol=1e-8, atol=1e-8), theta.at[i].set(zi), max_steps=300, throw=False
+    )
+    x = sol.value.at[i].set(zi)
+    return x, log_post(x)
+
+
+def ridge_profile(target, theta: np.ndarray, index: int) -> Ridge:
+    """The log-posterior of ``target`` (a :class:`~idtool._posterior._levels.LevelsTarget`)
+    profiled along
+    parameter ``index`` over :data:`RIDGE_POINTS` internal values spanning its range,
+    walking out from the point nearest ``theta`` in both directions, each maximisation
+    warm-started from its neighbour's (:class:`Ridge`)."""
+    grid = np.linspace(-Z_AT_BOUND, Z_AT_BOUND, RIDGE_POINTS)
+    theta = np.array(theta, float)
+    theta[index] = float(np.clip(theta[index], -Z_AT_BOUND, Z_AT_BOUND))
+    mid = int(np.argmin(np.abs(grid - theta[index])))
+    out = np.empty((grid.size, theta.size))
+    lp = np.full(grid.size, -np.inf)
+    for order in (range(mid, grid.size), range(mid, -1, -1)):
+        x = jnp.asarray(theta)
+        for j in order:
+            x_j, lp_j = _maximise_others(x, index, jnp.asarray(grid[j]), target)
+            out[j], lp[j] = np.asarray(x_j), float(lp_j)
+            if np.isfinite(lp[j]):
+                x = x_j
+    p, prior = target.params[index], target.priors[index]
+    own = np.array([float(prior.logpdf(p.value(g))) + float(p.log_jacobian(g)) for g in grid])
+    lp = np.where(np.isfinite(lp), lp, -np.inf)
+    return Ridge(index, grid, out, lp, lp - own)
+
+
+def open_sides(ridge: Ridge) -> str:
+    """Which side alone the data bound the profiled parameter on (``"lower"``: bounded
+    below only, ``"upper"``: above only, ``""``: both or neither), by the fit's rule
+    (:func:`idtool._fit._result.one_sided`): a side is open when the likelihood-ratio
+    95% set, where ``-2 log L`` is within 3.84 of its minimum, reaches the edge of the
+    range on it. The set's ends are the profile points just outside it: a profile with
+    a valley and a second plateau (Kt's creep and Coulomb limits) is open on both."""
+    ll = ridge.log_lik
+    inside = np.nonzero(2.0 * (np.max(ll) - ll) < _CHI2_95)[0]
+    first, last = int(inside[0]), int(inside[-1])
+    z_lo = float(ridge.grid[first - 1]) if first > 0 else -Z_AT_BOUND
+    z_hi = float(ridge.grid[last + 1]) if last < ll.size - 1 else Z_AT_BOUND
+    return one_sided(z_lo, z_hi)
+
+
+def ridge_walkers(
+    ridge: Ridge, cov: np.ndarray, walkers: int, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each walker's centre (walkers, ndim): a profile point drawn in proportion to the
+    profile's density (``exp(log_post)``, the points equally spaced), the profiled
+    parameter spread uniformly over its cell; and the covariance of the walkers' spread
+    around their centres (``cov`` without the profiled parameter's correlations, a tenth
+    of its variance: the profile already follows the ridge)."""
+    lp = ridge.log_post
+    w = np.exp(lp - np.max(lp))
+    w = np.where(np.isfinite(w), w, 0.0)
+    pick = rng.choice(ridge.grid.size, size=walkers, p=w / w.sum())
+    centres = ridge.theta[pick].copy()
+    step = float(ridge.grid[1] - ridge.grid[0])
+    centres[:, ridge.index] += rng.uniform(-0.5 * step, 0.5 * step, walkers)
+    spread = 0.1 * np.asarray(cov, float)
+    spread[ridge.index, :] = 0.0
+    spread[:, ridge.index] = 0.0
+    spread[ridge.index, ridge.index] = 1e-12  # the cell's uniform spread is its spread
+    return centres, spread
+
+
+class RidgeTarget(eqx.Module):
+    """A log-posterior sampled on coordinates sheared along a :class:`Ridge`: the walkers
+    hold the profiled parameter's internal value ``z`` and every other parameter's offset
+    from the profile's maximising value at ``z`` (linear between the profile points,
+    the end points' beyond them), ``theta = x + path(z)``. The shear's Jacobian is 1, so
+    the density is the target's own; along the ridge the other parameters stay near
+    zero, and the creep and Coulomb plateaus of Kt (whose coupling gains differ by
+    ``pi^2 / 4``) become one straight valley the walkers cross along ``z`` alone."""
+
+    base: Any  # the LevelsTarget
+    index: int = eqx.field(static=True)
+    grid: Array  # (points,) the profiled parameter's internal values
+    path: Array  # (points, ndim): the maximising vectors, the profiled column zero
+
+    @classmethod
+    def along(cls, base: Any, ridge: Ridge) -> RidgeTarget:
+        """The shear of ``base`` along ``ridge`` (points where the profile failed take
+        their neighbours' values)."""
+        ok = np.isfinite(ridge.log_post)
+        path = np.stack(
+            [np.interp(ridge.grid, ridge.grid[ok], c[ok]) for c in ridge.theta.T], axis=1
+        )
+        path[:, ridge.index] = 0.0
+        return cls(base, ridge.index, jnp.asarray(ridge.grid), jnp.asarray(path))
+
+    @classmethod
+    def from_doc(cls, base: Any, doc: dict) -> RidgeTarget:
+        """Rebuilt from :meth:`to_doc` (a resumed chain)."""
+        return cls(base, int(doc["index"]), jnp.asarray(doc["grid"]), jnp.asarray(doc["path"]))
+
+    def to_doc(self) -> dict:
+        """The shear as data (recorded with the chain, which holds the sheared ``x``:
+        ``theta[:, k] = x[:, k] + interp(x[:, index], grid, path[:, k])``)."""
+        return {
+            "index": self.index,
+            "grid": np.asarray(self.grid).tolist(),
+            "path": np.asarray(self.path).tolist(),
+            "formula": "theta[k] = x[k] + interp(x[index], grid, path[:, k])",
+        }
+
+    @property
+    def params(self) -> tuple[Param, ...]:
+        return self.base.params
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.base.names
+
+    def _shift(self, x):
+        z = x[..., self.index]
+        return jnp.stack([jnp.interp(z, self.grid, c) for c in self.path.T], axis=-1)
+
+    def to_internal(self, x):
+        """Internal vectors ``theta`` (..., ndim) of sheared ones ``x``."""
+        return x + self._shift(x)
+
+    def from_internal(self, theta):
+        """Sheared vectors ``x`` of internal ones ``theta`` (..., ndim)."""
+        return theta - self._shift(theta)
+
+    def log_posterior_batch(self, x: Array) -> Array:
+        """The base's log-posterior at the sheared vectors ``x`` (walkers, ndim)."""
+        return self.base.log_posterior_batch(self.to_internal(x))
