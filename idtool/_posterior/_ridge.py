@@ -29,9 +29,9 @@ import math
 from typing import Any
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jaxtyping import Array
 
 from idtool._fit._result import Z95, Z_AT_BOUND, one_sided
@@ -95,31 +95,43 @@ def weak_parameter(
     return best
 
 
-@eqx.filter_jit
-def _maximise_others(theta, i, zi, target):
-    """``theta`` with its ``i``-th entry held at ``zi`` and the others maximising
-    ``target``'s log-posterior (optimistix's BFGS; a -inf step is rejected by its line
-    search)."""
-
-    def log_post(x):
-        return target.log_posterior_batch(x[None])[0]
-
-    def loss(x, _):
-        return -log_post(x.at[i].set(zi))
-
-    sol: optx.Solution = optx.minimise(
-        loss, optx.BFGS(rtol=1e-8, atol=1e-8), theta.at[i].set(zi), max_steps=300, throw=False
-    )
-    x = sol.value.at[i].set(zi)
-    return x, log_post(x)
+@jax.jit
+def _value_and_grad(theta, target):
+    return jax.value_and_grad(lambda th: target.log_posterior_batch(th[None])[0])(theta)
 
 
-def ridge_profile(target, theta: np.ndarray, index: int) -> Ridge:
+def _maximise_others(theta: np.ndarray, index: int, target: Any) -> tuple[np.ndarray, float]:
+    """``theta`` with every entry but ``index`` maximising ``target``'s log-posterior
+    (SciPy's BFGS on the JAX gradient: one compilation, 7 s against optimistix's 13 s
+    on the levels posterior); ``theta`` itself if it does not improve on it."""
+    from scipy.optimize import minimize
+
+    free = np.arange(theta.size) != index
+
+    def neg(x):
+        th = theta.copy()
+        th[free] = x
+        v, g = _value_and_grad(jnp.asarray(th), target)
+        v, g = float(v), np.asarray(g)[free]
+        if not np.isfinite(v) or not np.all(np.isfinite(g)):
+            return 1e30, np.zeros(x.size)
+        return -v, -g
+
+    res = minimize(neg, theta[free], jac=True, method="BFGS", options={"maxiter": 500})
+    out = theta.copy()
+    if res.fun < neg(theta[free])[0]:
+        out[free] = res.x
+    value = -neg(out[free])[0]
+    return out, value if value > -1e30 else -np.inf
+
+
+def ridge_profile(target: Any, theta: np.ndarray, index: int) -> Ridge:
     """The log-posterior of ``target`` (a :class:`~idtool._posterior._levels.LevelsTarget`)
-    profiled along
-    parameter ``index`` over :data:`RIDGE_POINTS` internal values spanning its range,
-    walking out from the point nearest ``theta`` in both directions, each maximisation
-    warm-started from its neighbour's (:class:`Ridge`)."""
+    profiled along parameter ``index`` over :data:`RIDGE_POINTS` internal values spanning
+    its range (:class:`Ridge`): walking out from the point nearest ``theta`` in both
+    directions, each maximisation (:func:`_maximise_others`) warm-started from its
+    neighbour's, so the profile follows the ridge from one plateau to the other (the
+    other plateau's coupling gain is 10 of its sds away from the fit's)."""
     grid = np.linspace(-Z_AT_BOUND, Z_AT_BOUND, RIDGE_POINTS)
     theta = np.array(theta, float)
     theta[index] = float(np.clip(theta[index], -Z_AT_BOUND, Z_AT_BOUND))
@@ -127,15 +139,14 @@ def ridge_profile(target, theta: np.ndarray, index: int) -> Ridge:
     out = np.empty((grid.size, theta.size))
     lp = np.full(grid.size, -np.inf)
     for order in (range(mid, grid.size), range(mid, -1, -1)):
-        x = jnp.asarray(theta)
+        x = theta.copy()
         for j in order:
-            x_j, lp_j = _maximise_others(x, index, jnp.asarray(grid[j]), target)
-            out[j], lp[j] = np.asarray(x_j), float(lp_j)
+            x[index] = grid[j]
+            out[j], lp[j] = _maximise_others(x, index, target)
             if np.isfinite(lp[j]):
-                x = x_j
+                x = out[j].copy()
     p, prior = target.params[index], target.priors[index]
     own = np.array([float(prior.logpdf(p.value(g))) + float(p.log_jacobian(g)) for g in grid])
-    lp = np.where(np.isfinite(lp), lp, -np.inf)
     return Ridge(index, grid, out, lp, lp - own)
 
 

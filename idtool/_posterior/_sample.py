@@ -260,11 +260,12 @@ def sample_posterior(
         rng = np.random.default_rng(seed)
         weak = weak_parameter(levels_target.params, theta, cov, k)
         if weak is not None:  # the data barely bound it: sampled along its profile
+            capped = start_within(theta, cov, params)[1]
             ridge = ridge_profile(levels_target, theta, weak)
             one_sided = {params[weak].name: open_sides(ridge)}
             sheared = RidgeTarget.along(levels_target, ridge)
             fn = LogPosterior(sheared, _batch(walkers, noise))
-            theta, cov = ridge_walkers(ridge, start_within(theta, cov, params)[1], walkers, rng)
+            theta, cov = ridge_walkers(ridge, capped, walkers, rng)
             theta = np.asarray(sheared.from_internal(jnp.asarray(theta)))
         mode_s = time.perf_counter() - started
         p0 = initial_walkers(theta, cov, fn, walkers, rng, levels_target.params)
