@@ -64,6 +64,13 @@ class TwoPlateaus(eqx.Module):
         return _log_lik(z, g) + own
 
 
+def _batched(target):
+    def fn(x):
+        return np.asarray(target.log_posterior_batch(jnp.asarray(np.atleast_2d(x))))
+
+    return fn
+
+
 def test_a_fit_at_a_bound_starts_its_walkers_inside_the_range():
     # the ceiling bench's fit: Kt at its bound, internal -30, Gauss-Newton variance 1e19
     theta = np.array([-30.0, 1.0])
@@ -97,7 +104,8 @@ def test_only_a_parameter_wider_than_two_decades_is_profiled():
 
 def test_the_profile_follows_the_curved_ridge_to_the_other_plateau():
     target = TwoPlateaus()
-    ridge = ridge_profile(target, np.array([-3.0, 1.0]), 0)  # started on one plateau
+    # started on one plateau
+    ridge = ridge_profile(_batched(target), target, np.array([-3.0, 1.0]), 0)
     assert ridge.grid.size == RIDGE_POINTS
     assert ridge.grid[0] == -Z_AT_BOUND and ridge.grid[-1] == Z_AT_BOUND
     # every profile point on the ridge (the other plateau's gain is 21 sds away); the
@@ -138,7 +146,7 @@ def test_the_sides_the_data_bound_are_the_fits_rule_on_the_profile():
 
 def test_the_sheared_coordinates_keep_the_density():
     target = TwoPlateaus()
-    ridge = ridge_profile(target, np.array([-3.0, 1.0]), 0)
+    ridge = ridge_profile(_batched(target), target, np.array([-3.0, 1.0]), 0)
     sheared = RidgeTarget.along(target, ridge)
     theta = np.array([[-2.0, 1.01], [0.3, 0.7], [4.0, 0.35], [-8.0, 1.2]])
     x = np.asarray(sheared.from_internal(jnp.asarray(theta)))

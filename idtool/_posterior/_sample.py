@@ -261,7 +261,7 @@ def sample_posterior(
         weak = weak_parameter(levels_target.params, theta, cov, k)
         if weak is not None:  # the data barely bound it: sampled along its profile
             capped = start_within(theta, cov, params)[1]
-            ridge = ridge_profile(levels_target, theta, weak)
+            ridge = ridge_profile(fn, levels_target, theta, weak)
             one_sided = {params[weak].name: open_sides(ridge)}
             sheared = RidgeTarget.along(levels_target, ridge)
             fn = LogPosterior(sheared, _batch(walkers, noise))
