@@ -91,10 +91,13 @@ def test_a_fit_at_a_bound_starts_its_walkers_inside_the_range():
     assert np.all(np.isfinite(fn(p0)))
 
 
-def test_only_a_parameter_wider_than_two_decades_is_profiled():
+def test_only_a_parameter_wider_than_half_a_decade_is_profiled():
     theta = np.array([0.0, 1.0])
-    narrow = np.diag([0.05**2, 1e-4])  # Kt over 0.4 decades
+    # d ln Kt / dz = ln(1e9) / 4 = 5.18 at z = 0: an internal sd of 0.02 is 0.18 decades
+    narrow = np.diag([0.02**2, 1e-4])
     assert weak_parameter((KT, GAIN), theta, narrow, 2) is None
+    decade = np.diag([0.115**2, 1e-4])  # one decade (the coupling bench's 0.8-1.1)
+    assert weak_parameter((KT, GAIN), theta, decade, 2) == 0
     wide = np.diag([1.0, 1e-4])  # over ~9 decades
     assert weak_parameter((KT, GAIN), theta, wide, 2) == 0
     at_bound = np.array([-30.0, 1.0])  # at the bound, whatever its variance
