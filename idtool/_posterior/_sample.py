@@ -9,7 +9,12 @@
   (:mod:`idtool._posterior._runner`).
 * Walkers start from a multivariate normal around the fit's optimum with the fit's
   covariance (the shared block of ``cov_z``; the noise parameters from their asymptotic
-  errors); the log-posterior must be finite at the optimum and at every start.
+  errors), brought inside the parameters' ranges
+  (:func:`idtool._posterior._start.start_within`); the log-posterior must be finite at
+  the optimum and at every start. Where the fit's interval of a physical parameter
+  spans over half a decade (Kt read through a coupling law the bench may not follow),
+  the levels posterior is profiled along it, the walkers start on that profile and
+  sample coordinates sheared along it (:mod:`idtool._posterior._ridge`).
 * Seeded: walker starts from ``numpy.random.default_rng(seed)``, emcee's moves from
   ``RandomState(seed)``; the same seed gives the same chain, bit for bit.
 * Checkpointed (``chain_path``): every ``checkpoint_s`` seconds (and at the end) the
