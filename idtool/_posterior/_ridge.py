@@ -17,7 +17,7 @@ So where the fit's 95% interval of a physical log-scale parameter spans more tha
 it (every other parameter maximised, :func:`ridge_profile`) over its whole internal range
 and places the walkers on that profile in proportion to its density
 (:func:`ridge_walkers`), so every mode starts populated; the sampler's mode-hopping move
-(:func:`idtool._posterior._sample._levels_moves`) then carries walkers between them. The
+(:func:`idtool._posterior._moves.levels_moves`) then carries walkers between them. The
 same profile, with the parameter's own prior taken out, says which sides the data bound
 (:func:`open_sides`, the fit's rule: :func:`idtool._fit._result.one_sided`).
 """
