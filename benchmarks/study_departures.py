@@ -105,6 +105,7 @@ def score(kind: str, seed: int, design: str = "paper", sample: bool = True) -> d
         out[f"post_{name}"] = lo <= value <= hi
         out[f"post_{name}_err"] = summary[name]["median"] / value - 1.0
         out[f"post_{name}_decades"] = float(np.log10(hi / lo))
+        out[f"post_{name}_one_sided"] = bool(summary[name].get("one_sided"))  # "> lo", "< hi"
     preds = fit.predict(*HELD_OUT, HELD_OUT_SPEED)
     out["post_fr"] = inside(preds)
     at_matrix = fit.predict(*MATRIX, HELD_OUT_SPEED)
@@ -137,7 +138,8 @@ def table(rows: list[dict]) -> None:
     head = (
         f"{'kind':9}{'conv':>6}{'steps':>7}{'s':>6}{'tau':>6} {'slowest':15}"
         f"{'FR fit':>8}{'FR post':>8}{'Kt fit':>7}{'Kt post':>8}{'mu fit':>7}{'mu post':>8}"
-        f"{'Kt err':>8}{'mu err':>8}{'Kt dec':>7}{'Kt 1s':>6}{'hw':>7}{'drift':>6}{'misfit':>7}"
+        f"{'Kt err':>8}{'mu err':>8}{'Kt dec':>7}{'Kt 1s':>6}{'post':>6}{'hw':>7}"
+        f"{'drift':>6}{'misfit':>7}"
         f"{'l-p':>5}  levels"
     )
     print(head)
@@ -162,6 +164,7 @@ def table(rows: list[dict]) -> None:
             f"{frac('fit_Kt'):>7}{frac('post_Kt'):>8}{frac('fit_mu'):>7}{frac('post_mu'):>8}"
             f"{np.mean(post_err):8.1%}{np.mean(post_mu_err):8.2%}{max(decades):7.2f}"
             f"{sum(r.get('fit_Kt_one_sided', False) for r in rs):>4}/{n}"
+            f"{sum(r.get('post_Kt_one_sided', False) for r in rs):>4}/{n}"
             f"{np.mean([r['half_width'] for r in rs]):7.4f}"
             f"{sum(r['drift_warning'] for r in rs):>4}/{n}"
             f"{sum(r['misfit_warning'] for r in rs):>5}/{n}"

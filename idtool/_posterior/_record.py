@@ -68,6 +68,9 @@ class PosteriorRecord:
     model: BenchModel | None = None  # the model sampled (for predictions)
     conditioning: Conditioning | None = None  # the data the discrepancy is conditioned on
     free_levels: FreeLevels | None = None  # the levels model's data (its noise is LEVELS)
+    # per parameter the data bound on one side only ("lower": below only, "upper": above
+    # only; idtool._posterior._ridge.open_sides): its interval is stated "> lo" or "< hi"
+    one_sided: dict[str, str] = dataclasses.field(default_factory=dict)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -93,5 +96,6 @@ class PosteriorRecord:
                 "mean": float(np.mean(x)),
                 "sd": float(np.std(x)),
                 "unit": p.unit,
+                "one_sided": self.one_sided.get(name, ""),
             }
         return out

@@ -4,12 +4,18 @@
   model vmapped, the bench model with walkers as its fastest axis), is compiled once and
   handed to ``emcee.EnsembleSampler(vectorize=True)``; emcee evaluates half the ensemble
   (DE move) or a quarter (snooker move) at a time, in batches of a fixed size
-  (:func:`_batch`), so every call has the same shape (one compilation).
+  (:func:`idtool._posterior._moves.batch_rows`), so every call has the same shape (one
+  compilation).
 * Without a fixed number of steps it samples until the chain has converged
   (:mod:`idtool._posterior._runner`).
 * Walkers start from a multivariate normal around the fit's optimum with the fit's
   covariance (the shared block of ``cov_z``; the noise parameters from their asymptotic
-  errors); the log-posterior must be finite at the optimum and at every start.
+  errors), brought inside the parameters' ranges
+  (:func:`idtool._posterior._start.start_within`); the log-posterior must be finite at
+  the optimum and at every start. Where the fit's interval of a physical parameter
+  spans over half a decade (Kt read through a coupling law the bench may not follow),
+  the levels posterior is profiled along it, the walkers start on that profile and
+  sample coordinates sheared along it (:mod:`idtool._posterior._ridge`).
 * Seeded: walker starts from ``numpy.random.default_rng(seed)``, emcee's moves from
   ``RandomState(seed)``; the same seed gives the same chain, bit for bit.
 * Checkpointed (``chain_path``): every ``checkpoint_s`` seconds (and at the end) the
@@ -51,6 +57,8 @@ from idtool._posterior._likelihood import (
     build_target,
     sampled_params,
 )
+from idtool._posterior._moves import batch_rows as _batch
+from idtool._posterior._moves import sampler_moves as _moves
 from idtool._posterior._posterior import LEVELS, FitLike, Posterior
 from idtool._posterior._prior import (
     DISTRIBUTIONS,
@@ -59,8 +67,15 @@ from idtool._posterior._prior import (
     parse_priors,
     read_priors,
 )
+from idtool._posterior._ridge import (
+    RidgeTarget,
+    open_sides,
+    ridge_profile,
+    ridge_walkers,
+    weak_parameter,
+)
 from idtool._posterior._runner import FIRST_CHECK, MAX_MINUTES, MAX_STEPS, ChainStore, run_chain
-from idtool._posterior._start import find_start, initial_walkers
+from idtool._posterior._start import find_start, initial_walkers, start_within
 
 __all__ = ["CHAIN_FILE", "LogPosterior", "sample_posterior"]
 
@@ -80,7 +95,7 @@ class LogPosterior:
     call; the first call's compilation time is kept in ``compile_s``.
     """
 
-    def __init__(self, target: Target | LevelsTarget, batch: int):
+    def __init__(self, target: Target | LevelsTarget | RidgeTarget, batch: int):
         self.target = target
         self.batch = batch
         self.compile_s: float | None = None
@@ -241,14 +256,27 @@ def sample_posterior(
         raise IdtoolError(f"max_minutes {max_minutes:g}: give a positive number")
     started = time.perf_counter()
     warnings: tuple[str, ...] = ()
+    one_sided: dict[str, str] = {}  # the sides the data alone bound (_ridge.open_sides)
+    sheared: RidgeTarget | None = None  # sampled along a ridge (_ridge.RidgeTarget)
     if done == 0 and noise == LEVELS:
         free, sds = fit.levels
         levels_target = build_levels_target(fit.model, free, table)
         k = fit.model.n_physical
         theta, cov = levels_start(fit.z[:k], fit.cov_z[:k, :k], sds, levels_target)
-        z_lin, mode_s = np.asarray(fit.z), 0.0
+        z_lin = np.asarray(fit.z)
         fn = LogPosterior(levels_target, _batch(walkers, noise))
-        p0 = initial_walkers(theta, cov, fn, walkers, np.random.default_rng(seed))
+        rng = np.random.default_rng(seed)
+        weak = weak_parameter(levels_target.params, theta, cov, k)
+        if weak is not None:  # the data barely bound it: sampled along its profile
+            capped = start_within(theta, cov, params)[1]
+            ridge = ridge_profile(fn, levels_target, theta, weak)
+            one_sided = {params[weak].name: open_sides(ridge)}
+            sheared = RidgeTarget.along(levels_target, ridge)
+            fn = LogPosterior(sheared, _batch(walkers, noise))
+            theta, cov = ridge_walkers(ridge, capped, walkers, rng)
+            theta = np.asarray(sheared.from_internal(jnp.asarray(theta)))
+        mode_s = time.perf_counter() - started
+        p0 = initial_walkers(theta, cov, fn, walkers, rng, levels_target.params)
         initial: Any = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
     elif done == 0:
         rebuild = functools.partial(build_target, fit.model, noise=noise, priors=table)
@@ -256,20 +284,28 @@ def sample_posterior(
         mode_s = time.perf_counter() - started
         z_lin, warnings = start.z_lin, start.warnings
         fn = LogPosterior(start.target, _batch(walkers, noise))
-        p0 = initial_walkers(start.theta, start.cov, fn, walkers, np.random.default_rng(seed))
+        rng = np.random.default_rng(seed)
+        p0 = initial_walkers(start.theta, start.cov, fn, walkers, rng, start.target.params)
         initial = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
     else:
         assert chain_file is not None
         z_lin = read_linearisation(chain_file)
         if noise == LEVELS:
+            levels_target = build_levels_target(fit.model, fit.levels[0], table)
+            assert stored is not None
+            if stored.get("ridge"):  # sampled along a ridge (_ridge.RidgeTarget)
+                sheared = RidgeTarget.from_doc(levels_target, stored["ridge"])
             fn = LogPosterior(
-                build_levels_target(fit.model, fit.levels[0], table), _batch(walkers, noise)
+                sheared if sheared is not None else levels_target, _batch(walkers, noise)
             )
         else:
             fn = LogPosterior(build_target(fit.model, z_lin, noise, table), _batch(walkers, noise))
         initial = last_state(chain_file)
         mode_s = 0.0
-    settings = _settings(fit, params, table, noise, walkers, seed) | {"warnings": list(warnings)}
+    settings = _settings(fit, params, table, noise, walkers, seed)
+    settings |= {"warnings": list(warnings), "one_sided": one_sided}
+    if sheared is not None:  # the chain holds sheared vectors: how to map them back
+        settings["ridge"] = sheared.to_doc()
     store = ChainStore(chain_file, settings, np.asarray(z_lin))
     bar = _progress(progress, steps if steps is not None else max(done, FIRST_CHECK), done)
     start_done = done
@@ -291,11 +327,14 @@ def sample_posterior(
     finally:
         bar.close()
     chain, lp, acc = store.read()
+    if sheared is not None:  # the sampled coordinates back to the internal scale
+        chain = np.asarray(sheared.to_internal(jnp.asarray(chain)))
     values = np.stack(
         [np.asarray(p.value(jnp.asarray(chain[:, :, i]))) for i, p in enumerate(params)], axis=-1
     )
     if stored is not None:
         warnings = tuple(stored.get("warnings", ()))
+        one_sided = dict(stored.get("one_sided", {}))
     timing = {
         "mode_search_s": mode_s,
         "compile_s": float(fn.compile_s or 0.0),
@@ -322,53 +361,8 @@ def sample_posterior(
         model=fit.model,
         conditioning=fit.conditioning,
         free_levels=fit.levels[0] if noise == LEVELS else None,
+        one_sided=one_sided,
     )
-
-
-def _batch(walkers: int, noise: str) -> int:
-    """Rows of the compiled log-posterior. The levels model's: a quarter of the ensemble
-    (rounded up), the snooker move's subsets; the DE move's halves run as two batches (its
-    cost is linear in the rows, 1.0, 2.0 and 3.8 ms for 8, 16 and 32: a padded batch would
-    be time lost). The traces' own (noise-only) posterior: half the ensemble, DE's halves."""
-    return -(-walkers // 4) if noise == LEVELS else -(-walkers // 2)
-
-
-def _moves(noise: str = LEVELS):
-    """The levels model's moves (:func:`_levels_moves`); on the traces' own (noise-only)
-    posterior DE alone, measured better there: largest tau 27 against 48 with the snooker
-    on the example (32 x 3000, benchmarks/bench_sample.py), whose 8 parameters (the
-    actuator's slopes and the noise's sd and phi among them) are near-Gaussian."""
-    import emcee
-
-    if noise == LEVELS:
-        return _levels_moves()
-    return [(emcee.moves.DEMove(), 1.0)]
-
-
-def _levels_moves():
-    """emcee's differential-evolution move (ter Braak 2006) and its snooker variant (ter
-    Braak & Vrugt 2008), half and half, chosen by measured autocorrelation times on levels
-    posteriors (32 walkers x 4000 steps, seed 0): the example and the departure benches
-    "scatter", "coupling" and "all" (seed 1). Largest tau per bench:
-
-    ============  =======  ==========  ==========  ==========
-    bench         DE       DE + 35% S  DE + 50% S  DE + 65% S
-    ============  =======  ==========  ==========  ==========
-    example       101      34          32          36
-    coupling      254      37          38          38
-    all           192      51          44          38
-    scatter       -        37          33          37
-    ============  =======  ==========  ==========  ==========
-
-    DE alone stalls on the curved ridge of the saturating coupling's gain and load scale
-    (acceptance 0.09-0.16) and on the skewed log-sd of the discrepancy; the snooker's
-    jumps along the line through another walker follow both. With the log-posterior
-    compiled for a quarter of the ensemble (:func:`_batch`) a snooker step costs what a
-    DE step costs. Folding the sds onto a signed linear scale (sd = |s|) was measured too:
-    it helped the sds but slowed the physical parameters (largest tau 72)."""
-    import emcee
-
-    return [(emcee.moves.DEMove(), 0.5), (emcee.moves.DESnookerMove(), 0.5)]
 
 
 class _NoBar:

@@ -12,8 +12,9 @@
    ``MODE_MARGIN``, the walkers start there, the nuisances are re-linearised at that
    mode, and a warning says the fit should be redone.
 3. Walkers: a multivariate normal around the mode with the fit's covariance (the shared
-   block of ``cov_z``; the noise parameters' asymptotic errors). The log-posterior must
-   be finite at the mode and at every walker (walkers outside the support are redrawn).
+   block of ``cov_z``; the noise parameters' asymptotic errors), brought inside the
+   bounded parameters' ranges (:func:`start_within`). The log-posterior must be finite
+   at the mode and at every walker (walkers outside the support are redrawn).
 """
 
 from __future__ import annotations
@@ -30,7 +31,9 @@ import optimistix as optx
 from idtool._diagnostic import Diagnostic
 from idtool._errors import IdtoolError
 from idtool._fit._folder import FIT_JSON
+from idtool._fit._result import Z_AT_BOUND
 from idtool._model._noise import whiten
+from idtool._model._params import Param
 from idtool._posterior._likelihood import (
     Target,
     log_posterior,
@@ -39,9 +42,20 @@ from idtool._posterior._likelihood import (
     predict_blocks,
 )
 
-__all__ = ["MODE_MARGIN", "Start", "find_start", "initial_walkers"]
+__all__ = [
+    "MAX_START_SD_Z",
+    "MODE_MARGIN",
+    "Start",
+    "find_start",
+    "initial_walkers",
+    "start_within",
+]
 
 MODE_MARGIN = 3.0  # log-posterior units: e^3 = 20 times more probable
+# The walkers' largest spread on a bounded parameter's internal scale (start_within): a
+# unit there is a quarter of its range's logarithm near the middle (2.2 decades of Kt),
+# wide enough that the ensemble finds the posterior's extent itself within its burn-in.
+MAX_START_SD_Z = 0.5
 RSS_FACTOR = 2.0  # other multi-start optima polished: RSS within this factor of the best
 
 
@@ -189,23 +203,56 @@ def find_start(fit: Any, target: Target, rebuild: Callable[[np.ndarray], Target]
     return Start(best_theta, cov, best_lp, z_lin, target, tuple(modes), tuple(warnings))
 
 
+def start_within(
+    theta: np.ndarray, cov: np.ndarray, params: tuple[Param, ...]
+) -> tuple[np.ndarray, np.ndarray]:
+    """The walkers' centre and covariance (internal scale) brought inside the bounded
+    parameters' ranges: the centre to within :data:`Z_AT_BOUND` of the middle, the
+    spread to at most :data:`MAX_START_SD_Z` (the covariance's rows and columns scaled,
+    its correlations kept).
+
+    A fit that leaves a parameter at a bound of its range (Kt at 1e4 N/m, the creep
+    limit, on a bench whose coupling law the fit does not ship) has its internal value
+    far beyond it (-30) and a Gauss-Newton variance there of 1e19, since the transform is
+    flat: walkers drawn from it started at internal Kt -7e9, log-posterior -7e9, and the
+    whole default run (44,000 steps, 10 minutes) was the ensemble crawling in from there,
+    its differential-evolution steps throwing every other parameter to its bounds on the
+    way (tau 968, never converged). The posterior itself is inside the range: where the
+    data do not bound a parameter the prior does (:mod:`idtool._posterior._prior`)."""
+    theta = np.array(theta, float)
+    scale = np.ones(theta.size)
+    for i, p in enumerate(params):
+        if p.bounded:
+            theta[i] = float(np.clip(theta[i], -Z_AT_BOUND, Z_AT_BOUND))
+            sd = float(np.sqrt(max(cov[i, i], 0.0)))
+            if sd > MAX_START_SD_Z:
+                scale[i] = MAX_START_SD_Z / sd
+    return theta, np.asarray(cov, float) * np.outer(scale, scale)
+
+
 def initial_walkers(
     theta: np.ndarray,
     cov: np.ndarray,
     fn: Callable[[np.ndarray], np.ndarray],
     walkers: int,
     rng: np.random.Generator,
+    params: tuple[Param, ...],
 ) -> np.ndarray:
-    """``walkers`` positions around ``theta`` (normal, covariance ``cov``), every one
-    with a finite log-posterior."""
-    ndim = theta.size
+    """``walkers`` positions around ``theta`` (normal, covariance ``cov``, both brought
+    inside the ranges of ``params``, :func:`start_within`), every one with a finite
+    log-posterior. ``theta`` (ndim,) one centre, or (walkers, ndim) one per walker
+    (:func:`idtool._posterior._ridge.ridge_walkers`)."""
+    centres = np.broadcast_to(np.asarray(theta, float), (walkers, np.shape(theta)[-1]))
+    centres = np.stack([start_within(c, cov, params)[0] for c in centres])
+    cov = start_within(centres[0], cov, params)[1]
+    ndim = centres.shape[1]
     chol = np.linalg.cholesky(cov + 1e-14 * np.diag(np.maximum(np.diag(cov), 1e-30)))
-    p0 = theta + rng.standard_normal((walkers, ndim)) @ chol.T
+    p0 = centres + rng.standard_normal((walkers, ndim)) @ chol.T
     for _ in range(50):
         bad = ~np.isfinite(fn(p0))
         if not bad.any():
             return p0
-        p0[bad] = theta + rng.standard_normal((int(bad.sum()), ndim)) @ chol.T
+        p0[bad] = centres[bad] + rng.standard_normal((int(bad.sum()), ndim)) @ chol.T
     raise IdtoolError(
         "could not place every walker where the log-posterior is finite; "
         "are the priors much narrower than the fit's intervals?"

@@ -75,10 +75,12 @@ def sample_report(
         if name in est:
             lo, hi = est[name].ci95
             fit_ci = f"   fit {_fmt(est[name].estimate)} [{_fmt(lo)}, {_fmt(hi)}]"
-        lines.append(
-            f"    {name:20s}{_fmt(s['median']):>12s} {s['unit']:4s} "
-            f"[{_fmt(s['ci95'][0])}, {_fmt(s['ci95'][1])}]{fit_ci}"
-        )
+        interval = f"[{_fmt(s['ci95'][0])}, {_fmt(s['ci95'][1])}]"
+        if s.get("one_sided"):  # the data bound it on one side only: said as the fit's
+            ci = (s["ci95"][0], s["ci95"][1])
+            one = Estimate(name, s["unit"], s["median"], s["sd"], ci, one_sided=s["one_sided"])
+            interval = one.statement
+        lines.append(f"    {name:20s}{_fmt(s['median']):>12s} {s['unit']:4s} {interval}{fit_ci}")
     lines += ["[[Diagnostics]]", post.diagnostics.report()]
     if isinstance(check, LevelsCheck):
         lines += [
