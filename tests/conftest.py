@@ -96,6 +96,19 @@ def small_fit_folder(tmp_path_factory) -> Path:
     return out
 
 
+@pytest.fixture(scope="session")
+def example_default_run():
+    """The shipped example's fit with every default (seed 0), as ``idtool.fit`` runs it
+    (``fit_dataset``; 24 traces, the levels model): read by tests/test_fit.py,
+    tests/test_sample_until_converged.py and tests/test_variability.py, each of which
+    fitted it itself before (three cold fits of 20-30 CPU s on two workers). A frozen
+    ``FitRun``: a test that needs a :class:`idtool.Fit` wraps it in its own
+    (``Fit.from_run``), so one file's posterior or folder never reaches another."""
+    from idtool._fit._run import fit_dataset
+
+    return fit_dataset(idtool.load_dataset(idtool.example_dataset_path()), seed=0)
+
+
 # --- xdist: which worker takes what, and in which order ---------------------------------
 #
 # ``--dist loadfile`` (the Makefile's) gives each worker whole units, in the order they
@@ -110,19 +123,24 @@ def small_fit_folder(tmp_path_factory) -> Path:
 # their parameter, each value a unit of its own: their tests share no fixture, and one
 # file alone would hold a worker for minutes.
 GROUPS: dict[str, tuple[str, ...]] = {
-    # the example's design (the paper's 24-trace matrix): its default fit and posterior,
-    # and the departure benches of the coverage test on the same matrix
-    "the paper's matrix": (
+    # the example's design (the paper's 24-trace matrix): its default fit (the bank's
+    # example_default_run, read by test_fit, test_sample_until_converged and
+    # test_variability) and posterior, and the departure benches of the coverage test on
+    # the same matrix; and 270 and 670 N x 50 and 70%, one 2 s ON window, 3 s sliding
+    # either side: 4 traces (test_fit, test_report, test_validate_fit). One unit, as
+    # test_fit reads both (it also compiles the example's fit afresh: it checks which
+    # programs a fit compiles, from cleared caches)
+    "the paper's matrix and four traces": (
         "tests/test_api.py",
         "tests/test_coverage.py",
         "tests/test_sample_until_converged.py",
+        "tests/test_variability.py",
+        "tests/test_fit.py",
+        "tests/test_report.py",
+        "tests/test_validate_fit.py",
     ),
     # sample_helpers.small_params: the bank's small fit, its posteriors
     "the small design": ("tests/test_arviz.py", "tests/test_predict.py", "tests/test_sample.py"),
-    # 270 and 670 N x 50 and 70%, one 2 s ON window, 3 s sliding either side: 4 traces
-    # (test_fit fits the example too, but compiles it afresh anyway: it checks which
-    # programs a fit compiles, from cleared caches)
-    "four traces": ("tests/test_fit.py", "tests/test_report.py", "tests/test_validate_fit.py"),
 }
 SPLIT_BY_PARAMETER = ("tests/test_notebooks.py",)
 # Seconds a file takes (a split file's total; or a unit's own, by its name), measured
@@ -132,18 +150,18 @@ SPLIT_BY_PARAMETER = ("tests/test_notebooks.py",)
 # taken as light, and goes last.
 FILE_SECONDS: dict[str, float] = {
     "tests/test_api.py": 645,
-    "tests/test_compare.py": 550,
+    "tests/test_compare.py": 460,  # 2026-11-25: the sdof test's compare, 62 -> 30 CPU s
     "tests/test_coverage.py": 370,
-    "tests/test_notebooks.py[02_fit_new_material]": 285,
+    "tests/test_notebooks.py[02_fit_new_material]": 155,  # 94.5 -> 51.2 CPU s (5 fits)
     "tests/test_notebooks.py[03_uncertainty_design_maps]": 210,
     "tests/test_notebooks.py[01_seed_model]": 125,
-    "tests/test_sample_until_converged.py": 300,
-    "tests/test_coupling_sdof.py": 300,
+    "tests/test_sample_until_converged.py": 270,  # the example's fit: the bank's
+    "tests/test_coupling_sdof.py": 265,  # predictions 40 -> 29 CPU s (kriging rows)
     "tests/test_coupling_laws.py": 290,
     "tests/test_transducer.py": 250,
     "tests/test_sample.py": 200,
     "tests/test_parameter_settings.py": 190,
-    "tests/test_variability.py": 180,
+    "tests/test_variability.py": 150,  # the example's fit: the bank's
     "tests/test_plateau_drift.py": 160,
     "tests/test_speed_design.py": 150,
     "tests/test_coverage_fading.py": 120,

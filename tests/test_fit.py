@@ -47,8 +47,10 @@ def assert_recovered(run, truth: dict) -> None:
 
 
 @pytest.fixture(scope="module")
-def example_run():
-    return fit_dataset(idtool.load_dataset(idtool.example_dataset_path()), seed=0)
+def example_run(example_default_run):
+    """``fit_dataset`` of the example with every default, seed 0 (the bank's,
+    tests/conftest.py)."""
+    return example_default_run
 
 
 def test_example_dataset_recovers_its_truth(example_run):

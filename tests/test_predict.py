@@ -1,16 +1,19 @@
 """Predictions (issue 5) and the ``idtool sample`` / ``idtool predict`` commands."""
 
+import dataclasses
 import json
 import shutil
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import idtool
 from idtool._cli._main import main
+from idtool._fit._discrepancy import Conditioning, length_scales, operating_coordinates
 from idtool._posterior._diagnostics import import_arviz
 from idtool._predict._amplitude import amplitude_for_reduction
-from idtool._predict._predict import predict_friction_ratio
+from idtool._predict._predict import _fr_draws, predict_friction_ratio
 
 
 @pytest.fixture(scope="module")
@@ -150,3 +153,26 @@ def test_sample_and_predict_on_a_folder_without_a_fit(tmp_path, capsys):
     ):
         assert main(cmd) == 2
         assert "fit.json" in capsys.readouterr().err
+
+
+def test_the_discrepancy_is_conditioned_on_every_measured_row(fit_folder):
+    """``Draws.kriging`` evaluates the model once per distinct operating point and
+    gathers it to the measured rows (one per trace: 8 traces at 4 points here): its
+    weights ``S^-1 (y - g)`` equal those from the model evaluated at every row."""
+    fit = idtool.load_fit(fit_folder)
+    d = fit.model.data
+    op = np.asarray(d.op_index)
+    x = np.asarray(operating_coordinates(d.op_load_n[op], d.op_alpha[op], d.op_speed_m_s[op]))
+    assert x.shape[0] == 8 and np.unique(x, axis=0).shape[0] == 4
+    draws = fit.draws(max_draws=50)
+    v = {k: jnp.asarray(a) for k, a in draws.values.items()}
+    rows = (d.op_load_n[op], d.op_alpha[op], d.op_speed_m_s[op])
+    g = np.log(np.asarray(_fr_draws(draws.model, v, *(jnp.asarray(r) for r in rows))))
+    # the measured log FR: the model's at the first draw, plus 1% of noise (seeded)
+    y = g[0] + 0.01 * np.random.default_rng(0).standard_normal(8)
+    sds = {"discrepancy_fr": np.full(draws.n, 0.03), "scatter_fr": np.full(draws.n, 0.01)}
+    c = Conditioning(x, y, 1e-4 * np.eye(8), length_scales(d))
+    draws = dataclasses.replace(draws, sds=sds, conditioning=c)
+    weights, s_inv = c.weights(g, sds["discrepancy_fr"], sds["scatter_fr"])
+    np.testing.assert_allclose(draws.kriging[2], weights, rtol=1e-9, atol=0)
+    np.testing.assert_array_equal(draws.kriging[3], s_inv)

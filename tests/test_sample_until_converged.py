@@ -7,7 +7,6 @@ path on a simulated bench's default fit (levels model)."""
 
 import json
 import shutil
-import warnings
 
 import emcee
 import numpy as np
@@ -120,14 +119,13 @@ def test_the_bounds_stop_a_run_that_cannot_converge_and_say_so():
 
 
 @pytest.fixture(scope="module")
-def default_fit(tmp_path_factory):
+def default_fit(tmp_path_factory, example_default_run):
     """The shipped example's default fit (three loads, two amplitudes: a design whose
     posterior is proper; on two loads at one amplitude the power limit's load scale is
-    bounded by its prior only and no run converges within the bounds)."""
+    bounded by its prior only and no run converges within the bounds): the bank's run
+    (tests/conftest.py), saved as ``idtool.fit(dataset, seed=0).save`` would."""
     dataset = idtool.load_dataset(example_dataset_path())
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the fit's own warnings are not checked here
-        fit = idtool.fit(dataset, seed=0)
+    fit = idtool.Fit.from_run(dataset, example_default_run)
     folder = tmp_path_factory.mktemp("fits") / "small"
     fit.save(folder)
     return folder

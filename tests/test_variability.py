@@ -17,9 +17,11 @@ from idtool._predict._predict import Draws, with_variability
 
 
 @pytest.fixture(scope="module")
-def example_fits():
+def example_fits(example_default_run):
+    """``idtool.fit`` of the example, with and without the levels model (the first
+    from the bank's run, tests/conftest.py, in a Fit of this module's own)."""
     ds = idtool.load_dataset(idtool.example_dataset_path())
-    return idtool.fit(ds), idtool.fit(ds, variability=False)
+    return idtool.Fit.from_run(ds, example_default_run), idtool.fit(ds, variability=False)
 
 
 def test_neg_log_lik_is_the_gaussian_density_with_theta_profiled():
