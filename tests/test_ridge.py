@@ -136,8 +136,9 @@ def _ridge(log_lik):
 def test_the_sides_the_data_bound_are_the_fits_rule_on_the_profile():
     z = np.linspace(-Z_AT_BOUND, Z_AT_BOUND, RIDGE_POINTS)
     assert open_sides(_ridge(-0.5 * z**2)) == ""  # a peak: bounded on both sides
-    # two plateaus and a valley (the ceiling bench): the 95% set reaches both edges
-    assert open_sides(_ridge(-5.0 * np.exp(-2.0 * z**2))) == ""
+    # two plateaus and a valley (the ceiling bench): the 95% set reaches both edges, and
+    # the interval is said to be the range's, not the data's
+    assert open_sides(_ridge(-5.0 * np.exp(-2.0 * z**2))) == "neither"
     # falling only towards small values: bounded below, open above ("> lo")
     rising = np.minimum(z, 0.0) * 3.0
     assert open_sides(_ridge(rising)) == "lower"
@@ -145,6 +146,8 @@ def test_the_sides_the_data_bound_are_the_fits_rule_on_the_profile():
     # said as the fit's one-sided estimates are
     e = Estimate("Kt", "N/m", 1e9, 0.0, (1.6e8, 1e13), one_sided="lower")
     assert e.statement.startswith("> 1.6e+08")
+    e = Estimate("Kt", "N/m", 1e9, 0.0, (1.5e4, 3.8e12), one_sided="neither")
+    assert e.statement == "[1.5e+04, 3.8e+12] (95%; not identified: bounded by its range alone)"
 
 
 def test_the_sheared_coordinates_keep_the_density():

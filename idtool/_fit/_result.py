@@ -37,7 +37,8 @@ class Estimate:
     fixed_label: str = ""  # who fixed it, for reports ("fixed by the user", ...)
     # "lower" when the data bound it from below only (its interval runs to the top of
     # its range: reported as "> ci95[0]"), "upper" from above only ("< ci95[1]"),
-    # "" when they bound it on both sides (or on neither: the interval is its range)
+    # "neither" when the interval runs to both ends of its range (not identified),
+    # "" when the data bound it on both sides
     one_sided: str = ""
 
     @property
@@ -50,6 +51,8 @@ class Estimate:
             return f"> {lo:.4g} (95%; not bounded above)"
         if self.one_sided == "upper":
             return f"< {hi:.4g} (95%; not bounded below)"
+        if self.one_sided == "neither":
+            return f"[{lo:.4g}, {hi:.4g}] (95%; not identified: bounded by its range alone)"
         return f"[{lo:.5g}, {hi:.5g}]"
 
 
@@ -138,6 +141,8 @@ def one_sided(z_lo: float, z_hi: float) -> str:
     an end at or beyond :data:`Z_AT_BOUND` is the parameter's range, not an end the data
     set (:attr:`Estimate.one_sided`)."""
     open_lo, open_hi = z_lo <= -Z_AT_BOUND, z_hi >= Z_AT_BOUND
+    if open_lo and open_hi:
+        return "neither"
     if open_hi and not open_lo:
         return "lower"
     if open_lo and not open_hi:

@@ -276,6 +276,8 @@ def write_report(
                 ci = f"> {g(e.ci95[0])} (not bounded above)"
             elif e.one_sided == "upper":
                 ci = f"< {g(e.ci95[1])} (not bounded below)"
+            elif e.one_sided == "neither":  # the interval is the parameter's range
+                ci += " (not identified: bounded by its range alone)"
             row += [ci]
             if n in fixed:
                 row[-1:] = [e.fixed_label or "fixed by the user", "-", "fixed (not sampled)"]
