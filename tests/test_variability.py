@@ -13,6 +13,8 @@ import pytest
 import idtool
 from idtool._fit import _reml as reml
 from idtool._fit._discrepancy import Conditioning, correlation, discrepancy_moments
+from idtool._fit._free_levels import INFORMED_ON, _free_step, _linearise
+from idtool._fit._program import u_normal_equations
 from idtool._predict._predict import Draws, with_variability
 
 
@@ -161,3 +163,37 @@ def test_discrepancy_conditioning_is_gaussian_conditioning():
     assert var[1] < (2 * sd_c) ** 2
     # 3000 N is 3.3 length scales outside the design: unconditional to 0.1%
     assert var[2] == pytest.approx(sd_d**2, rel=1e-3)
+
+
+def test_free_levels_in_blocks_are_the_dense_solution(example_fits):
+    """The free levels' step through the Schur complement of the trace blocks, and their
+    covariance as blocks plus a low rank (issue 28), against the dense normal equations
+    in ``u`` solved and inverted whole (the reference, kept here)."""
+    res = example_fits[1].result
+    model, z, phi = res.model, np.asarray(res.z), res.phi
+    k, m = model.n_physical, model.data.n_traces
+    free, u = _free_step(model, z, phi)
+    w, lv, _, cc, cr = _linearise(model, z, phi)
+    jtj, jtr = u_normal_equations(model, cc, cr)
+    info = np.diag(jtj)
+    on_free = free.measured | (info[m : 2 * m] > INFORMED_ON * info[:m])
+    keep = np.flatnonzero(np.concatenate([np.ones(m, bool), on_free, np.ones(z.size - k, bool)]))
+    sub = jtj[np.ix_(keep, keep)]
+    step = np.linalg.solve(sub, jtr[keep])
+    ref = np.concatenate([lv, z[k:]])
+    ref[keep] -= step
+    sigma2 = (float(w @ w) - float(jtr[keep] @ step)) / (w.size - keep.size)
+    cov_u = np.zeros((ref.size, ref.size))
+    cov_u[np.ix_(keep, keep)] = sigma2 * np.linalg.inv(sub)
+    idx = np.flatnonzero(free.measured)
+    dy = np.zeros((m + idx.size, ref.size))
+    dy[np.arange(m), np.arange(m)] = 1.0 / ref[:m]
+    dy[m + np.arange(idx.size), m + idx] = 1.0 / ref[m + idx]
+    dy[m + np.arange(idx.size), idx] = -1.0 / ref[idx]
+    cov_y = dy @ cov_u @ dy.T
+    np.testing.assert_allclose(u, ref, rtol=1e-10, atol=1e-12)
+    assert free.sigma_n == pytest.approx(math.sqrt(sigma2), rel=1e-10)
+    np.testing.assert_allclose(free.cov_y, cov_y, rtol=0, atol=1e-10 * np.abs(cov_y).max())
+    r = np.random.default_rng(1).normal(size=cov_y.shape[0])
+    assert free.cov_parts is not None
+    assert free.cov_parts.quad(r) == pytest.approx(r @ np.linalg.solve(cov_y, r), rel=1e-8)
