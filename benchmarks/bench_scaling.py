@@ -40,6 +40,8 @@ import json
 import math
 import subprocess
 import sys
+import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -79,6 +81,17 @@ json.dump({{
 }}, sys.stdout)
 """
 
+# ``idtool fit`` end to end (defaults) on the dataset in argv[1], in this child: its peak
+# resident memory printed last; the parent times the whole process
+CHILD_E2E = """
+import json, resource, sys
+from idtool._cli._main import console
+sys.argv = ["idtool", "fit", sys.argv[1], "--out", sys.argv[2], "--force", "-q"]
+code = console()
+print(json.dumps({"code": code,
+    "peak_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6}))
+"""
+
 
 def repeated_bench(n_traces: int, seed: int = SEED):
     """The ``scatter`` departure bench (seed ``seed``) on the 12 operating points of
@@ -107,6 +120,32 @@ def run(n: int, path: str) -> dict | None:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def run_e2e(n: int, folder: Path) -> dict | None:
+    """``idtool fit`` (command line, defaults) on :func:`repeated_bench` of ``n`` traces
+    written to ``folder``: run twice (the first fills the compilation caches for these
+    shapes), the second timed; wall time of the whole process and its peak memory."""
+    from idtool._data._write import write_dataset
+
+    data = folder / f"bench{n}"
+    write_dataset(repeated_bench(n, SEED), data, force=True)
+    out = None
+    for _ in range(2):
+        t = time.perf_counter()
+        out = subprocess.run(
+            [sys.executable, "-c", CHILD_E2E, str(data), str(folder / f"fit{n}")],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        wall = time.perf_counter() - t
+        if out.returncode:
+            print(out.stderr[-2000:], file=sys.stderr)
+            return None
+    assert out is not None
+    row = json.loads(out.stdout.strip().splitlines()[-1])
+    return {"traces": n, "seconds": wall, "peak_gb": row["peak_gb"]}
+
+
 def exponent(rows: list[dict]) -> float:
     """Slope of log(time) against log(traces), least squares."""
     x = np.log([r["traces"] for r in rows])
@@ -118,7 +157,12 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--counts", type=int, nargs="+", default=[12, 24, 48, 96, 384])
     ap.add_argument("--dense-max", type=int, default=48)
+    ap.add_argument(
+        "--e2e", action="store_true", help="time idtool fit end to end instead (module docstring)"
+    )
     args = ap.parse_args()
+    if args.e2e:
+        return main_e2e(args.counts)
     rows: dict[str, list[dict]] = {"arrowhead": [], "dense": []}
     print(
         f"{'traces':>6}  {'arrowhead s':>11} {'fit s':>6} {'GB':>5} {'steps':>5} {'conv':>5}"
@@ -151,6 +195,22 @@ def main() -> int:
             print(f"{key}: time ~ traces^{exponent(r):.2f} ({span} traces)")
     ok = all(math.isfinite(r["seconds"]) for r in rows["arrowhead"])
     return 0 if ok and len(rows["arrowhead"]) == len(args.counts) else 1
+
+
+def main_e2e(counts: list[int]) -> int:
+    """``--e2e``: :func:`run_e2e` per trace count, and the exponent."""
+    rows = []
+    print(f"{'traces':>6}  {'idtool fit s':>12} {'GB':>5}")
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in counts:
+            r = run_e2e(n, Path(tmp))
+            if r is None:
+                return 1
+            rows.append(r)
+            print(f"{n:>6}  {r['seconds']:>12.1f} {r['peak_gb']:>5.2f}", flush=True)
+    if len(rows) >= 2:
+        print(f"idtool fit: time ~ traces^{exponent(rows):.2f}")
+    return 0
 
 
 if __name__ == "__main__":

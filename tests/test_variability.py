@@ -139,19 +139,27 @@ def test_levels_posterior_samples_the_sds(example_fits):
 def test_discrepancy_conditioning_is_gaussian_conditioning():
     """The kriging moments against conditioning the joint Gaussian of (d(x*), y) by
     brute force; at a measured point the band follows the data, far away it reverts to
-    the unconditional sd."""
+    the unconditional sd. Two traces at each of the six points (with a dense noise
+    covariance): the moments go through the distinct points (issue 28)."""
     rng = np.random.default_rng(3)
     scales = np.array([0.45, 0.1, 0.1])
-    x = np.array([[np.log(n), a, np.log(0.025)] for n in (270, 450, 670) for a in (0.5, 0.7)])
-    v = np.diag(rng.uniform(1e-6, 4e-6, x.shape[0]))  # the free FRs' noise (log)
-    y, g = rng.normal(0, 0.05, x.shape[0]), np.zeros(x.shape[0])
+    pts = np.array([[np.log(n), a, np.log(0.025)] for n in (270, 450, 670) for a in (0.5, 0.7)])
+    x = np.concatenate([pts, pts[::-1]])  # repeats, not in order
+    a_ = rng.normal(size=(x.shape[0], x.shape[0]))
+    v = np.diag(rng.uniform(1e-6, 4e-6, x.shape[0])) + 1e-7 * a_ @ a_.T / x.shape[0]
+    y = rng.normal(0, 0.05, x.shape[0])
     sd_d, sd_c = 0.08, 0.01
     cond = Conditioning(x, y, v, scales)
-    weights, s_inv = cond.weights(g[None], np.array([sd_d]), np.array([sd_c]))
+    np.testing.assert_array_equal(cond.points, np.unique(pts, axis=0))
+    g_points = rng.normal(0, 0.01, (1, cond.points.shape[0]))
+    weights, s_inv = cond.weights(g_points, np.array([sd_d]), np.array([sd_c]))
+    assert weights.shape == (1, 6) and s_inv.shape == (1, 6, 6)
+    where = [int(np.flatnonzero(np.all(cond.points == row, axis=1))[0]) for row in x]
+    g = g_points[0, where]
     x_new = np.array(
         [[np.log(360.0), 0.6, np.log(0.025)], x[3], [np.log(3000.0), 0.6, np.log(0.025)]]
     )
-    mean, var = discrepancy_moments(x_new, x, scales, weights[0], s_inv[0], sd_d)
+    mean, var = discrepancy_moments(x_new, cond.points, scales, weights[0], s_inv[0], sd_d)
     # brute force: the joint covariance of (d(x_new), y), conditioned
     k_all = np.asarray(correlation(np.vstack([x_new, x]), np.vstack([x_new, x]), scales))
     joint = sd_d**2 * k_all

@@ -26,7 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from idtool._fit._compiled import program
-from idtool._fit._level_cov import LevelCovariance, psd_root
+from idtool._fit._discrepancy import psd_root
+from idtool._fit._level_cov import LevelCovariance
 from idtool._fit._program import run_lm
 from idtool._model._benchmodel import BenchModel
 

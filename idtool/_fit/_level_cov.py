@@ -32,7 +32,7 @@ import dataclasses
 
 import numpy as np
 
-from idtool._fit._discrepancy import correlation
+from idtool._fit._discrepancy import correlation, psd_root
 from idtool._model._xp import xp
 
 __all__ = [
@@ -40,7 +40,6 @@ __all__ = [
     "discrepancy_root",
     "factor",
     "from_pairs",
-    "psd_root",
     "solve",
     "to_pairs",
 ]
@@ -85,13 +84,6 @@ class LevelCovariance:
         t = np.zeros(3) if tau2 is None else np.asarray(tau2, float)
         rp = to_pairs(np.asarray(res_rows, float), self.measured.astype(bool))[:, :, None]
         return float(np.sum(rp * solve(factor(t, *self.arrays), rp)))
-
-
-def psd_root(a: np.ndarray) -> np.ndarray:
-    """``R`` with ``R R^T = a`` for a symmetric positive semi-definite ``a`` (eigenvalues
-    below 0 by round-off clipped to 0)."""
-    w, u = np.linalg.eigh(a)
-    return u * np.sqrt(np.maximum(w, 0.0))
 
 
 def to_pairs(v, measured: np.ndarray):
