@@ -17,6 +17,10 @@ with the exponent of a power law fitted to time against traces (least squares in
 
 Run: ``.venv/bin/python benchmarks/bench_scaling.py [--counts 12 24 48 96 384]
 [--dense-max 48]`` (15-20 minutes; the 384 traces alone 8 on a loaded 2-CPU machine).
+``--e2e``: ``idtool fit`` end to end instead (command line, defaults: the laws and
+actuators compared, the levels model, the figures), each count written as a dataset and
+fitted twice, the second timed (the first fills the compilation caches for its shapes);
+wall time of the process and its peak memory.
 
 Measured 2026-11-25, load average 6-10 on 2 CPUs (other jobs; the timings are noisy),
 before the OFF switch of the slope actuator was rounded: fit + checks 0.9, 12.4, 19.8,
@@ -30,6 +34,22 @@ After (same day, load average 10-12): 3.1, 6.4, 11.9, 43.8, 206 s (fit alone 2.9
 11.4, 38.3, 182 s) and 0.50-1.11 GB; every fit converged to LM's own tolerance in
 181-204 steps whatever the traces; time ~ traces^1.24 (1.29 from 24 to 384), most of
 it the per-step cost (LM step ~ traces^1.1) and the machine's load.
+
+``idtool fit`` end to end (``--e2e``), 2026-11-25, second run of two:
+
+- 03:30, load average 9-14 (three other jobs): before the levels model, the free
+  levels, the sampler's levels likelihood and the predictions' conditioning went to
+  per-trace blocks and traces.png to at most 24 panels (commit 63ad8a2): 96 traces 34 s
+  (0.74 GB), 384 traces 346 s (2.5 GB); after, 8.7, 11.4, 12.6, 15.5, 81.5 s and 0.46,
+  0.48, 0.53, 0.60, 0.90 GB at 12, 24, 48, 96, 384 traces. At load 4, 96 traces: 21-30 s
+  before, 10.8-11.3 s after.
+- 04:00, load average 2-4, on main's tree of then (fc91174: one OpenBLAS thread in the
+  console process, issue 27) without and with these changes: 2.6, 3.7, 5.3, 8.4, 52.4 s
+  and 0.47-2.38 GB (~traces^0.86) without; 2.6, 3.7, 6.4, 10.2, 22.5 s and 0.46, 0.49,
+  0.54, 0.60, 0.91 GB (~traces^0.63) with. At 96 traces the two are within the runs'
+  spread (profiled: levels model 0.83 -> 0.27 s, figures 3.9 -> 2.1 s, the three
+  candidates' LM fits 7.6-8.4 s either way: most of the time); at 384 (not profiled)
+  what differs is the levels model's (2 traces)^2 factorisations and the 384 panels.
 """
 
 from __future__ import annotations
