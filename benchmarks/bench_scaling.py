@@ -17,6 +17,10 @@ with the exponent of a power law fitted to time against traces (least squares in
 
 Run: ``.venv/bin/python benchmarks/bench_scaling.py [--counts 12 24 48 96 384]
 [--dense-max 48]`` (15-20 minutes; the 384 traces alone 8 on a loaded 2-CPU machine).
+``--e2e``: ``idtool fit`` end to end instead (command line, defaults: the laws and
+actuators compared, the levels model, the figures), each count written as a dataset and
+fitted twice, the second timed (the first fills the compilation caches for its shapes);
+wall time of the process and its peak memory.
 
 Measured 2026-11-25, load average 6-10 on 2 CPUs (other jobs; the timings are noisy),
 before the OFF switch of the slope actuator was rounded: fit + checks 0.9, 12.4, 19.8,
@@ -30,6 +34,22 @@ After (same day, load average 10-12): 3.1, 6.4, 11.9, 43.8, 206 s (fit alone 2.9
 11.4, 38.3, 182 s) and 0.50-1.11 GB; every fit converged to LM's own tolerance in
 181-204 steps whatever the traces; time ~ traces^1.24 (1.29 from 24 to 384), most of
 it the per-step cost (LM step ~ traces^1.1) and the machine's load.
+
+``idtool fit`` end to end (``--e2e``), 2026-11-25, second run of two:
+
+- 03:30, load average 9-14 (three other jobs): before the levels model, the free
+  levels, the sampler's levels likelihood and the predictions' conditioning went to
+  per-trace blocks and traces.png to at most 24 panels (commit 63ad8a2): 96 traces 34 s
+  (0.74 GB), 384 traces 346 s (2.5 GB); after, 8.7, 11.4, 12.6, 15.5, 81.5 s and 0.46,
+  0.48, 0.53, 0.60, 0.90 GB at 12, 24, 48, 96, 384 traces. At load 4, 96 traces: 21-30 s
+  before, 10.8-11.3 s after.
+- 04:00, load average 2-4, on main's tree of then (fc91174: one OpenBLAS thread in the
+  console process, issue 27) without and with these changes: 2.6, 3.7, 5.3, 8.4, 52.4 s
+  and 0.47-2.38 GB (~traces^0.86) without; 2.6, 3.7, 6.4, 10.2, 22.5 s and 0.46, 0.49,
+  0.54, 0.60, 0.91 GB (~traces^0.63) with. At 96 traces the two are within the runs'
+  spread (profiled: levels model 0.83 -> 0.27 s, figures 3.9 -> 2.1 s, the three
+  candidates' LM fits 7.6-8.4 s either way: most of the time); at 384 (not profiled)
+  what differs is the levels model's (2 traces)^2 factorisations and the 384 panels.
 """
 
 from __future__ import annotations
@@ -40,6 +60,8 @@ import json
 import math
 import subprocess
 import sys
+import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -79,6 +101,17 @@ json.dump({{
 }}, sys.stdout)
 """
 
+# ``idtool fit`` end to end (defaults) on the dataset in argv[1], in this child: its peak
+# resident memory printed last; the parent times the whole process
+CHILD_E2E = """
+import json, resource, sys
+from idtool._cli._main import console
+sys.argv = ["idtool", "fit", sys.argv[1], "--out", sys.argv[2], "--force", "-q"]
+code = console()
+print(json.dumps({"code": code,
+    "peak_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6}))
+"""
+
 
 def repeated_bench(n_traces: int, seed: int = SEED):
     """The ``scatter`` departure bench (seed ``seed``) on the 12 operating points of
@@ -107,6 +140,32 @@ def run(n: int, path: str) -> dict | None:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def run_e2e(n: int, folder: Path) -> dict | None:
+    """``idtool fit`` (command line, defaults) on :func:`repeated_bench` of ``n`` traces
+    written to ``folder``: run twice (the first fills the compilation caches for these
+    shapes), the second timed; wall time of the whole process and its peak memory."""
+    from idtool._data._write import write_dataset
+
+    data = folder / f"bench{n}"
+    write_dataset(repeated_bench(n, SEED), data, force=True)
+    out = None
+    for _ in range(2):
+        t = time.perf_counter()
+        out = subprocess.run(
+            [sys.executable, "-c", CHILD_E2E, str(data), str(folder / f"fit{n}")],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        wall = time.perf_counter() - t
+        if out.returncode:
+            print(out.stderr[-2000:], file=sys.stderr)
+            return None
+    assert out is not None
+    row = json.loads(out.stdout.strip().splitlines()[-1])
+    return {"traces": n, "seconds": wall, "peak_gb": row["peak_gb"]}
+
+
 def exponent(rows: list[dict]) -> float:
     """Slope of log(time) against log(traces), least squares."""
     x = np.log([r["traces"] for r in rows])
@@ -118,7 +177,12 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--counts", type=int, nargs="+", default=[12, 24, 48, 96, 384])
     ap.add_argument("--dense-max", type=int, default=48)
+    ap.add_argument(
+        "--e2e", action="store_true", help="time idtool fit end to end instead (module docstring)"
+    )
     args = ap.parse_args()
+    if args.e2e:
+        return main_e2e(args.counts)
     rows: dict[str, list[dict]] = {"arrowhead": [], "dense": []}
     print(
         f"{'traces':>6}  {'arrowhead s':>11} {'fit s':>6} {'GB':>5} {'steps':>5} {'conv':>5}"
@@ -151,6 +215,22 @@ def main() -> int:
             print(f"{key}: time ~ traces^{exponent(r):.2f} ({span} traces)")
     ok = all(math.isfinite(r["seconds"]) for r in rows["arrowhead"])
     return 0 if ok and len(rows["arrowhead"]) == len(args.counts) else 1
+
+
+def main_e2e(counts: list[int]) -> int:
+    """``--e2e``: :func:`run_e2e` per trace count, and the exponent."""
+    rows = []
+    print(f"{'traces':>6}  {'idtool fit s':>12} {'GB':>5}")
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in counts:
+            r = run_e2e(n, Path(tmp))
+            if r is None:
+                return 1
+            rows.append(r)
+            print(f"{n:>6}  {r['seconds']:>12.1f} {r['peak_gb']:>5.2f}", flush=True)
+    if len(rows) >= 2:
+        print(f"idtool fit: time ~ traces^{exponent(rows):.2f}")
+    return 0
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -13,6 +14,16 @@ import pytest
 import idtool
 from idtool._fit import _reml as reml
 from idtool._fit._discrepancy import Conditioning, correlation, discrepancy_moments
+from idtool._fit._free_levels import INFORMED_ON, _free_step, _linearise
+from idtool._fit._program import u_normal_equations
+from idtool._posterior._levels import (
+    SD_PRIOR,
+    _mean_and_cholesky,
+    _quad_and_logdet_blocks,
+    _quadratic,
+    build_levels_target,
+    levels_params,
+)
 from idtool._predict._predict import Draws, with_variability
 
 
@@ -139,19 +150,27 @@ def test_levels_posterior_samples_the_sds(example_fits):
 def test_discrepancy_conditioning_is_gaussian_conditioning():
     """The kriging moments against conditioning the joint Gaussian of (d(x*), y) by
     brute force; at a measured point the band follows the data, far away it reverts to
-    the unconditional sd."""
+    the unconditional sd. Two traces at each of the six points (with a dense noise
+    covariance): the moments go through the distinct points (issue 28)."""
     rng = np.random.default_rng(3)
     scales = np.array([0.45, 0.1, 0.1])
-    x = np.array([[np.log(n), a, np.log(0.025)] for n in (270, 450, 670) for a in (0.5, 0.7)])
-    v = np.diag(rng.uniform(1e-6, 4e-6, x.shape[0]))  # the free FRs' noise (log)
-    y, g = rng.normal(0, 0.05, x.shape[0]), np.zeros(x.shape[0])
+    pts = np.array([[np.log(n), a, np.log(0.025)] for n in (270, 450, 670) for a in (0.5, 0.7)])
+    x = np.concatenate([pts, pts[::-1]])  # repeats, not in order
+    a_ = rng.normal(size=(x.shape[0], x.shape[0]))
+    v = np.diag(rng.uniform(1e-6, 4e-6, x.shape[0])) + 1e-7 * a_ @ a_.T / x.shape[0]
+    y = rng.normal(0, 0.05, x.shape[0])
     sd_d, sd_c = 0.08, 0.01
     cond = Conditioning(x, y, v, scales)
-    weights, s_inv = cond.weights(g[None], np.array([sd_d]), np.array([sd_c]))
+    np.testing.assert_array_equal(cond.points, np.unique(pts, axis=0))
+    g_points = rng.normal(0, 0.01, (1, cond.points.shape[0]))
+    weights, s_inv = cond.weights(g_points, np.array([sd_d]), np.array([sd_c]))
+    assert weights.shape == (1, 6) and s_inv.shape == (1, 6, 6)
+    where = [int(np.flatnonzero(np.all(cond.points == row, axis=1))[0]) for row in x]
+    g = g_points[0, where]
     x_new = np.array(
         [[np.log(360.0), 0.6, np.log(0.025)], x[3], [np.log(3000.0), 0.6, np.log(0.025)]]
     )
-    mean, var = discrepancy_moments(x_new, x, scales, weights[0], s_inv[0], sd_d)
+    mean, var = discrepancy_moments(x_new, cond.points, scales, weights[0], s_inv[0], sd_d)
     # brute force: the joint covariance of (d(x_new), y), conditioned
     k_all = np.asarray(correlation(np.vstack([x_new, x]), np.vstack([x_new, x]), scales))
     joint = sd_d**2 * k_all
@@ -163,3 +182,71 @@ def test_discrepancy_conditioning_is_gaussian_conditioning():
     assert var[1] < (2 * sd_c) ** 2
     # 3000 N is 3.3 length scales outside the design: unconditional to 0.1%
     assert var[2] == pytest.approx(sd_d**2, rel=1e-3)
+
+
+def test_free_levels_in_blocks_are_the_dense_solution(example_fits):
+    """The free levels' step through the Schur complement of the trace blocks, and their
+    covariance as blocks plus a low rank (issue 28), against the dense normal equations
+    in ``u`` solved and inverted whole (the reference, kept here)."""
+    res = example_fits[1].result
+    model, z, phi = res.model, np.asarray(res.z), res.phi
+    k, m = model.n_physical, model.data.n_traces
+    free, u = _free_step(model, z, phi)
+    w, lv, _, cc, cr = _linearise(model, z, phi)
+    jtj, jtr = u_normal_equations(model, cc, cr)
+    info = np.diag(jtj)
+    on_free = free.measured | (info[m : 2 * m] > INFORMED_ON * info[:m])
+    keep = np.flatnonzero(np.concatenate([np.ones(m, bool), on_free, np.ones(z.size - k, bool)]))
+    sub = jtj[np.ix_(keep, keep)]
+    step = np.linalg.solve(sub, jtr[keep])
+    ref = np.concatenate([lv, z[k:]])
+    ref[keep] -= step
+    sigma2 = (float(w @ w) - float(jtr[keep] @ step)) / (w.size - keep.size)
+    cov_u = np.zeros((ref.size, ref.size))
+    cov_u[np.ix_(keep, keep)] = sigma2 * np.linalg.inv(sub)
+    idx = np.flatnonzero(free.measured)
+    dy = np.zeros((m + idx.size, ref.size))
+    dy[np.arange(m), np.arange(m)] = 1.0 / ref[:m]
+    dy[m + np.arange(idx.size), m + idx] = 1.0 / ref[m + idx]
+    dy[m + np.arange(idx.size), idx] = -1.0 / ref[idx]
+    cov_y = dy @ cov_u @ dy.T
+    np.testing.assert_allclose(u, ref, rtol=1e-10, atol=1e-12)
+    assert free.sigma_n == pytest.approx(math.sqrt(sigma2), rel=1e-10)
+    np.testing.assert_allclose(free.cov_y, cov_y, rtol=0, atol=1e-10 * np.abs(cov_y).max())
+    r = np.random.default_rng(1).normal(size=cov_y.shape[0])
+    assert free.cov_parts is not None
+    assert free.cov_parts.quad(r) == pytest.approx(r @ np.linalg.solve(cov_y, r), rel=1e-8)
+
+
+def test_levels_posterior_in_blocks_is_the_dense_one(example_fits):
+    """The sampler's levels likelihood with ``V + Sigma(sds)`` in blocks (issue 28)
+    against the dense Cholesky factorisation (the reference: a target without the
+    blocks, as a fit saved before them gives), at walkers around the fit."""
+    on, _ = example_fits
+    model, free = on.model, on.result.variability.free
+    assert free.cov_parts is not None
+    names = [p.name for p in levels_params(model, free)]
+    priors = dict.fromkeys(names, SD_PRIOR)
+    blocks = build_levels_target(model, free, priors)
+    dense = build_levels_target(model, dataclasses.replace(free, cov_parts=None), priors)
+    assert blocks.parts is not None and dense.parts is None
+    rng = np.random.default_rng(5)
+    k = model.n_physical
+    z = np.asarray(on.result.z)[:k]
+    v = {}
+    for i, p in enumerate(blocks.params):
+        internal = z[i] + 0.01 * rng.normal(size=6) if i < k else rng.uniform(0.0, 2.0, 6)
+        v[p.name] = p.value(jnp.asarray(internal))
+    quad, logdet = _quad_and_logdet_blocks(v, blocks)
+    g, chol = _mean_and_cholesky(v, dense)
+    want_quad = jax.vmap(_quadratic)(chol, dense.y[None] - g)
+    want_logdet = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol, axis1=1, axis2=2)), axis=1)
+    np.testing.assert_allclose(np.asarray(quad), np.asarray(want_quad), rtol=1e-9)
+    np.testing.assert_allclose(np.asarray(logdet), np.asarray(want_logdet), rtol=1e-11)
+    theta = rng.normal(size=(4, len(names))) * 0.01
+    theta[:, :k] += z
+    np.testing.assert_allclose(
+        np.asarray(blocks.log_posterior_batch(jnp.asarray(theta))),
+        np.asarray(dense.log_posterior_batch(jnp.asarray(theta))),
+        rtol=1e-10,
+    )

@@ -33,6 +33,7 @@ from idtool._errors import IdtoolError
 from idtool._fit._discrepancy import Conditioning
 from idtool._fit._folder import FIT_STATE
 from idtool._fit._free_levels import FreeLevels
+from idtool._fit._level_cov import LevelCovariance
 from idtool._fit._level_design import discrepancy_conditioning
 from idtool._fit._result import Estimate, FitResult
 from idtool._fit._summary import FitSummary, estimate_of_doc, fit_summary
@@ -162,7 +163,23 @@ def state_arrays(result: FitResult) -> dict[str, np.ndarray]:
             "levels_cov_y": free.cov_y,
             "levels_sigma_n": np.array(free.sigma_n),
         }
+        if free.cov_parts is not None:  # cov_y in blocks: the sampler's likelihood
+            arrays |= {
+                "levels_cov_block": free.cov_parts.block,
+                "levels_cov_low": free.cov_parts.low,
+            }
     return arrays
+
+
+def _cov_parts(state: Mapping[str, np.ndarray]) -> LevelCovariance | None:
+    """The free levels' covariance in blocks, where the fit saved them (since issue 28;
+    a folder without them samples on the dense ``levels_cov_y``)."""
+    if "levels_cov_block" not in state:
+        return None
+    block = np.asarray(state["levels_cov_block"])
+    measured = np.asarray(state["levels_measured"]).astype(float)
+    disc = np.zeros((block.shape[0], 2, 0))
+    return LevelCovariance(block, np.asarray(state["levels_cov_low"]), disc, measured)
 
 
 def _law_fit(spec: ModelSpec, data: FitData, state: Mapping[str, np.ndarray], where: str) -> LawFit:
@@ -179,6 +196,7 @@ def _law_fit(spec: ModelSpec, data: FitData, state: Mapping[str, np.ndarray], wh
             y=np.asarray(state["levels_y"]),
             cov_y=np.asarray(state["levels_cov_y"]),
             sigma_n=float(state["levels_sigma_n"]),
+            cov_parts=_cov_parts(state),
         )
         sds = {
             key.split(":", 1)[1]: (float(v[0]), float(v[1]), float(v[2]))

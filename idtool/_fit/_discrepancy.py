@@ -34,6 +34,7 @@ the whole uncertainty.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax.numpy as jnp
 import numpy as np
@@ -49,6 +50,7 @@ __all__ = [
     "discrepancy_moments",
     "length_scales",
     "operating_coordinates",
+    "psd_root",
 ]
 
 # Smallest length scales, for coordinates the design does not vary (or barely): 10% in
@@ -106,33 +108,79 @@ def discrepancy_moments(
     return mean, jnp.maximum(s2 - s2**2 * reduction, 0.0)
 
 
+def psd_root(a: np.ndarray) -> np.ndarray:
+    """``R`` with ``R R^T = a`` for a symmetric positive semi-definite ``a`` (eigenvalues
+    below 0 by round-off clipped to 0)."""
+    w, u = np.linalg.eigh(a)
+    return u * np.sqrt(np.maximum(w, 0.0))
+
+
 @dataclasses.dataclass(frozen=True)
 class Conditioning:
     """What conditioning the discrepancy on the data needs: the measured friction
     ratios' coordinates ``x`` (n, 3), their free estimates ``y`` (log FR, n) and noise
-    covariance ``v`` (n, n), and the length scales."""
+    covariance ``v`` (n, n), and the length scales.
+
+    The discrepancy is a function of the operating point, so the rows enter the
+    predictions only through the ``p`` distinct points they were measured at
+    (:attr:`points`): with ``P`` (n, p) which point each row is at, the kriging moments
+    need ``P^T S^-1 (y - g)`` and ``P^T S^-1 P`` (module docstring), per draw (p,) and
+    (p, p) whatever the traces (issue 28: (draws, n, n) was 1 GB at 384 traces and
+    2000 draws). ``S = A + s_d^2 P K P^T`` with ``A = V + s_c^2 I``: ``V``'s
+    eigenvectors (once) give ``A^-1`` at every scatter sd, and Woodbury's identity
+    adds the discrepancy's rank ``p``.
+    """
 
     x: np.ndarray
     y: np.ndarray
     v: np.ndarray
     scales: np.ndarray
 
+    @functools.cached_property
+    def _layout(self) -> tuple[np.ndarray, np.ndarray]:
+        """The distinct points (p, 3) and which one each row is at (n,)."""
+        points, where = np.unique(self.x, axis=0, return_inverse=True)
+        return points, np.ravel(where)
+
+    @property
+    def points(self) -> np.ndarray:
+        """The distinct operating points' coordinates (p, 3) the rows were measured at."""
+        return self._layout[0]
+
     @property
     def rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Load [N], amplitude fraction and speed [m/s] of the measured rows."""
-        return np.exp(self.x[:, 0]), self.x[:, 1], np.exp(self.x[:, 2])
+        """Load [N], amplitude fraction and speed [m/s] of the distinct :attr:`points`."""
+        x = self.points
+        return np.exp(x[:, 0]), x[:, 1], np.exp(x[:, 2])
+
+    @functools.cached_property
+    def _eigen(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``V``'s eigenvalues (n,) and eigenvectors (n, n), ``P^T Q`` (p, n) and a root
+        ``R`` (p, p) of the points' correlation ``K``."""
+        points, where = self._layout
+        lam, q = np.linalg.eigh(self.v)
+        pq = np.zeros((points.shape[0], q.shape[1]))
+        np.add.at(pq, where, q)
+        root = psd_root(np.asarray(correlation(points, points, self.scales)))
+        return lam, q, pq, root
 
     def weights(
         self, log_fr_model: np.ndarray, sd_disc: np.ndarray, sd_scatter: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Per draw: ``S^-1 (y - g)`` (draws, n) and ``S^-1`` (draws, n, n), from the
-        model's log FR at the measured rows (draws, n) and the draws' sds (draws,)."""
-        k = np.asarray(correlation(self.x, self.x, self.scales))
-        n = self.y.size
-        s = (
-            self.v[None]
-            + (sd_scatter**2)[:, None, None] * np.eye(n)[None]
-            + (sd_disc**2)[:, None, None] * k[None]
-        )
-        s_inv = np.linalg.inv(s)
-        return np.einsum("dij,dj->di", s_inv, self.y[None] - log_fr_model), s_inv
+        """Per draw: ``P^T S^-1 (y - g)`` (draws, p) and ``P^T S^-1 P`` (draws, p, p),
+        from the model's log FR at the :attr:`points` (draws, p) and the draws' sds
+        (draws,): the arguments ``weights`` and ``s_inv`` of
+        :func:`discrepancy_moments` with ``x_rows`` the :attr:`points`."""
+        lam, q, pq, root = self._eigen
+        where = self._layout[1]
+        inv = 1.0 / (lam[None, :] + (np.asarray(sd_scatter) ** 2)[:, None])  # (d, n)
+        res = self.y[None] - np.asarray(log_fr_model)[:, where]  # (d, n)
+        g = np.einsum("pn,dn,qn->dpq", pq, inv, pq)  # P^T A^-1 P
+        h = np.einsum("pn,dn->dp", pq, inv * (res @ q))  # P^T A^-1 (y - g)
+        s2 = (np.asarray(sd_disc) ** 2)[:, None, None]
+        gr = g @ root  # (d, p, p)
+        inner = np.eye(root.shape[1])[None] + s2 * (root.T[None] @ gr)
+        s_inv = g - s2 * gr @ np.linalg.solve(inner, gr.transpose(0, 2, 1))
+        rh = np.einsum("pr,dp->dr", root, h)[:, :, None]
+        weights = h - (s2 * gr @ np.linalg.solve(inner, rh))[:, :, 0]
+        return weights, s_inv

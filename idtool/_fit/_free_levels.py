@@ -26,7 +26,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from idtool._fit._compiled import program
-from idtool._fit._program import run_lm, u_normal_equations
+from idtool._fit._discrepancy import psd_root
+from idtool._fit._level_cov import LevelCovariance
+from idtool._fit._program import run_lm
 from idtool._model._benchmodel import BenchModel
 
 __all__ = ["INFORMED_ON", "MIN_AT_LEVEL_S", "FreeLevels", "free_levels", "model_log_levels"]
@@ -61,6 +63,9 @@ class FreeLevels:
     y: np.ndarray
     cov_y: np.ndarray
     sigma_n: float
+    # cov_y in per-trace blocks and a low rank (disc empty): a fresh fit's, None when
+    # read from a saved fit
+    cov_parts: LevelCovariance | None = None
 
     @property
     def friction_ratio(self) -> np.ndarray:
@@ -94,10 +99,12 @@ def _at_level_s(model: BenchModel, z: np.ndarray, levels: np.ndarray) -> np.ndar
 def _linearise(model: BenchModel, z: np.ndarray, phi: float):
     """The fit's own linearisation at ``z`` (no new program to compile): the whitened
     residuals, the levels ``(OFF, ON)``, their Jacobian in the physical parameters and
-    the normal equations in ``u = (OFF, ON, z[k:])``."""
+    each trace's blocks of the normal equations in ``u = (OFF, ON, z[k:])`` (colours:
+    the shared bench parameters, the trace's OFF and ON levels, its nuisances;
+    :func:`~idtool._fit._program.bench_normal_equations`)."""
     out = run_lm(model, np.asarray(z, float), np.ones(z.size, bool), phi, 0)
     lv, dlv, cc, cr = (np.asarray(x) for x in out.aux)
-    return (np.asarray(out.residuals), lv, dlv, *u_normal_equations(model, cc, cr))
+    return np.asarray(out.residuals), lv, dlv, cc, cr
 
 
 def free_levels(model: BenchModel, z: np.ndarray, phi: float) -> FreeLevels:
@@ -133,41 +140,78 @@ def _level_residuals(model: BenchModel, u, z, phi):
     return model.level_residuals(u, z, phi)
 
 
+def _u_layout(model: BenchModel) -> tuple[np.ndarray, np.ndarray]:
+    """Positions in ``u`` of the shared bench parameters (sb,) and of each trace's own
+    inputs (m, 2 + nb): its OFF level, its ON level, its nuisances (the colours' order)."""
+    group, m = model.level_group, model.data.n_traces
+    own = np.stack([np.flatnonzero(group == i) for i in range(m)])
+    return np.flatnonzero(group < 0), own
+
+
 def _free_step(model: BenchModel, z: np.ndarray, phi: float) -> tuple[FreeLevels, np.ndarray]:
-    """:func:`free_levels` at a given ``phi``, and ``u`` at the free optimum."""
+    """:func:`free_levels` at a given ``phi``, and ``u`` at the free optimum.
+
+    The normal equations in ``u`` are an arrowhead (the shared bench parameters, then
+    per trace its levels and nuisances): solved through the Schur complement of the
+    trace blocks (:mod:`idtool._fit._arrow`'s recipe), and the levels' covariance kept
+    as per-trace blocks plus the shared parameters' low rank
+    (:mod:`idtool._fit._level_cov`): linear in the traces, where the dense (6 traces)^2
+    system cost traces^3."""
     k, m = model.n_physical, model.data.n_traces
-    w, lv, _, jtj_u, jtr_u = _linearise(model, z, phi)
+    w, lv, _, cc, cr = _linearise(model, z, phi)
+    shared, own = _u_layout(model)
+    sb = shared.size
     measured = _at_level_s(model, z, lv) >= MIN_AT_LEVEL_S
-    info = np.diag(jtj_u)
-    on_free = measured | (info[m : 2 * m] > INFORMED_ON * info[:m])
+    on_free = measured | (cc[:, sb + 1, sb + 1] > INFORMED_ON * cc[:, sb, sb])
+    a, gs = cc[:, :sb, :sb].sum(axis=0), cr[:, :sb].sum(axis=0)
+    b, d, gb = cc[:, :sb, sb:].copy(), cc[:, sb:, sb:].copy(), cr[:, sb:].copy()
+    # an ON level held (not freed): its row and column out of the system
+    held = ~on_free
+    d[held, 1, :] = 0.0
+    d[held, :, 1] = 0.0
+    d[held, 1, 1] = 1.0
+    b[held, :, 1] = 0.0
+    gb[held, 1] = 0.0
+    d_inv = np.linalg.inv(d)  # (m, t, t)
+    e = d_inv @ b.transpose(0, 2, 1)  # (m, t, sb): D_i^-1 B_i^T
+    schur = a - np.einsum("msb,mbc->sc", b, e)
+    schur_inv = np.linalg.inv(schur) if sb else np.zeros((0, 0))
+    h_s = schur_inv @ (gs - np.einsum("mbs,mb->s", e, gb))
+    h_b = np.einsum("mbc,mc->mb", d_inv, gb) - e @ h_s
     u = np.concatenate([lv, z[k:]])
-    free = np.flatnonzero(np.concatenate([np.ones(m, bool), on_free, np.ones(z.size - k, bool)]))
-    jtj = jtj_u[np.ix_(free, free)]
-    step = np.linalg.solve(jtj, jtr_u[free])
-    u[free] -= step
+    u[shared] -= h_s
+    u[own] -= h_b
     # the residual sum of squares at the free optimum, to second order
-    rss = float(w @ w) - float(jtr_u[free] @ step)
-    sigma2 = rss / (w.size - free.size)
-    cov_u = np.zeros((u.size, u.size))
-    cov_u[np.ix_(free, free)] = sigma2 * np.linalg.inv(jtj)
-    # y = (log OFF, log ON - log OFF for the measured); its Jacobian in u
+    rss = float(w @ w) - float(gs @ h_s) - float(np.sum(gb * h_b))
+    sigma2 = rss / (w.size - (sb + h_b.size - int(held.sum())))
     idx = np.flatnonzero(measured)
     if not (np.all(u[:m] > 0.0) and np.all(u[m + idx] > 0.0)):
         # the step from a fit far from the data (a horn fading by a fifth within its
         # window, departure 'fading' seed 701) can take a level through zero: no log level
         raise np.linalg.LinAlgError("a trace's own level comes out at or below zero")
-    dy = np.zeros((m + idx.size, u.size))
-    dy[np.arange(m), np.arange(m)] = 1.0 / u[:m]
-    dy[m + np.arange(idx.size), m + idx] = 1.0 / u[m + idx]
-    dy[m + np.arange(idx.size), idx] = -1.0 / u[idx]
-    y = np.concatenate([np.log(u[:m]), np.log(u[m + idx] / u[idx])])
+    # y = (log OFF, log ON - log OFF for the measured): per trace its Jacobian in the
+    # trace's own inputs (2, t)
+    off, on = u[:m], u[m : 2 * m]
+    dy = np.zeros((m, 2, d.shape[1]))
+    dy[:, 0, 0] = 1.0 / off
+    dy[:, 1, 0] = np.where(measured, -1.0 / off, 0.0)
+    with np.errstate(divide="ignore"):  # an unmeasured ON level may sit at zero
+        dy[:, 1, 1] = np.where(measured, 1.0 / np.where(measured, on, 1.0), 0.0)
+    block = sigma2 * dy @ d_inv @ dy.transpose(0, 2, 1)
+    low = dy @ e @ psd_root(sigma2 * schur_inv)
+    block[~measured, 1, :] = 0.0
+    block[~measured, :, 1] = 0.0
+    block[~measured, 1, 1] = 1.0
+    parts = LevelCovariance(block, low, np.zeros((m, 2, 0)), measured.astype(float))
+    y = np.concatenate([np.log(off), np.log(u[m + idx] / u[idx])])
     return FreeLevels(
-        off_n=u[:m],
-        on_n=u[m : 2 * m],
+        off_n=off,
+        on_n=on,
         measured=measured,
         y=y,
-        cov_y=dy @ cov_u @ dy.T,
+        cov_y=parts.dense(np.zeros(3)),
         sigma_n=math.sqrt(sigma2),
+        cov_parts=parts,
     ), u
 
 

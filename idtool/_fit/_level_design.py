@@ -15,6 +15,7 @@ from idtool._fit._discrepancy import (
     operating_coordinates,
 )
 from idtool._fit._free_levels import FreeLevels
+from idtool._fit._level_cov import discrepancy_root
 from idtool._model._benchmodel import BenchModel
 
 __all__ = ["LevelDesign", "discrepancy_conditioning", "level_design"]
@@ -27,6 +28,8 @@ class LevelDesign:
     ``rows``: which of (log OFF per trace, log FR per trace) ``y`` holds; ``kinds``
     (n, 2) one-hot OFF / FR rows; ``disc_corr`` (n, n) the discrepancy's correlation
     between the FR rows (1 where they share an operating point; 0 in the OFF rows);
+    ``disc_root`` (traces, 2, p) the same as a root in pairs,
+    ``disc_corr = from_pairs(D) from_pairs(D)^T`` (:mod:`idtool._fit._level_cov`);
     ``active`` which of :data:`SD_PARAMS` the data can inform (``scatter_fr`` only with
     repeated operating points).
     """
@@ -36,6 +39,7 @@ class LevelDesign:
     disc_corr: np.ndarray
     op: np.ndarray
     active: np.ndarray
+    disc_root: np.ndarray
 
     @property
     def separable(self) -> bool:
@@ -56,7 +60,9 @@ def level_design(model: BenchModel, measured: np.ndarray) -> LevelDesign:
     disc_corr[m:, m:] = np.asarray(correlation(x, x, length_scales(model.data)))
     repeated = bool(op.size and np.any(np.bincount(op) >= 2))
     active = np.array([True, repeated, op.size > 0])
-    return LevelDesign(np.concatenate([np.arange(m), m + idx]), kinds, disc_corr, op, active)
+    root = discrepancy_root(x, measured, length_scales(model.data))
+    rows = np.concatenate([np.arange(m), m + idx])
+    return LevelDesign(rows, kinds, disc_corr, op, active, root)
 
 
 def discrepancy_conditioning(model: BenchModel, free: FreeLevels) -> Conditioning:

@@ -53,8 +53,9 @@ import scipy.special
 
 from idtool._diagnostic import Diagnostic
 from idtool._fit._free_levels import MIN_AT_LEVEL_S, FreeLevels, free_levels, model_log_levels
+from idtool._fit._level_cov import LevelCovariance, factor, solve, to_pairs
 from idtool._fit._level_design import level_design
-from idtool._fit._reml import GRID, at_sds, covariance, evaluate, fit_sds
+from idtool._fit._reml import GRID, at_sds, evaluate, fit_sds
 from idtool._model._benchmodel import BenchModel
 from idtool._model._params import Param
 
@@ -157,7 +158,24 @@ def _spike_and_slab(grid: np.ndarray, likelihood: np.ndarray) -> np.ndarray:
     return w / w.sum()
 
 
-def _line_search(model, z, phi, y, rows, c, theta, step, r, at_theta):
+def _gls_form(parts: LevelCovariance, tau2: np.ndarray):
+    """``(res, cols) -> (res^T C^-1 res, cols^T C^-1 cols)`` at the variances ``tau2``
+    (rows of the levels model; ``C`` in blocks, :mod:`idtool._fit._level_cov`)."""
+    f = factor(np.asarray(tau2, float), *parts.arrays)
+    meas = parts.measured.astype(bool)
+
+    def form(res: np.ndarray, cols: np.ndarray | None = None):
+        rp = to_pairs(np.asarray(res, float), meas)
+        quad = float(np.sum(rp * solve(f, rp[:, :, None])[:, :, 0]))
+        if cols is None:
+            return quad, None
+        gp = to_pairs(np.asarray(cols, float), meas)
+        return quad, np.einsum("mik,mil->kl", gp, solve(f, gp))
+
+    return form
+
+
+def _line_search(model, z, phi, y, rows, form, theta, step, r, at_theta):
     """``theta`` moved along the Gauss-Newton ``step``, halved until the generalised
     residual sum of squares ``r' C^-1 r`` does not rise (at most 30 halvings: then no
     move); returns the new ``theta``, the step taken and the model's log levels and
@@ -169,7 +187,7 @@ def _line_search(model, z, phi, y, rows, c, theta, step, r, at_theta):
     k = theta.size
 
     def gls(res):
-        return float(res @ np.linalg.solve(c, res))
+        return form(res)[0]
 
     before = gls(r)
     for _ in range(31):
@@ -192,9 +210,12 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
         raise NoMeasuredLevels("no trace's ON window is long enough to measure its ON level")
     rows, separable = design.rows, design.separable
     mask = design.active.astype(float)
+    meas = free.measured
+    assert free.cov_parts is not None  # a fresh free_levels'
+    parts = dataclasses.replace(free.cov_parts, disc=design.disc_root)
     # NumPy arrays throughout: the jitted programs take them as they are, and the host's
     # own arithmetic on them dispatches no eager JAX operations (:mod:`idtool._model._xp`)
-    args = (np.asarray(free.cov_y), np.asarray(design.kinds), np.asarray(design.disc_corr))
+    args = parts.arrays
     z = np.asarray(z, float)
     theta = z[:k].copy()
     s = np.log(np.full(3, 0.01))
@@ -202,25 +223,28 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
     for _ in range(12):
         g_all, jac_all = levels
         r, g = free.y - g_all[rows], jac_all[rows]
-        s = np.asarray(fit_sds(s, mask, r, g, *args))
+        r2, g2 = to_pairs(r, meas), to_pairs(g, meas)
+        s = np.asarray(fit_sds(s, mask, r2, g2, *args))
         s = np.clip(s, math.log(1e-6), math.log(2.0))
         tau2 = mask * np.exp(2.0 * s)
-        _, step = at_sds(tau2, r, g, args)
-        c = np.asarray(covariance(tau2, *args))
-        theta, step, levels = _line_search(model, z, phi, free.y, rows, c, theta, step, r, levels)
-        cov = np.linalg.inv(g.T @ np.linalg.solve(c, g))
+        _, step = at_sds(tau2, r2, g2, args)
+        form = _gls_form(parts, tau2)
+        theta, step, levels = _line_search(
+            model, z, phi, free.y, rows, form, theta, step, r, levels
+        )
+        cov = np.linalg.inv(form(r, g)[1])
         if not np.all(np.diag(cov) > 0.0):
             raise np.linalg.LinAlgError("they do not inform every physical parameter")
         if np.max(np.abs(step) / np.sqrt(np.diag(cov))) < 1e-3:
             break
     g_all, jac_all = levels  # at theta
     r, g = free.y - g_all[rows], jac_all[rows]
-    c = np.asarray(covariance(tau2, *args))
-    cov_theta = np.linalg.inv(g.T @ np.linalg.solve(c, g))
+    r2, g2 = to_pairs(r, meas), to_pairs(g, meas)
+    cov_theta = np.linalg.inv(_gls_form(parts, tau2)(r, g)[1])
     if not (np.all(np.isfinite(cov_theta)) and np.all(np.diag(cov_theta) > 0.0)):
         raise np.linalg.LinAlgError("they do not inform every physical parameter")
-    nll, _ = at_sds(tau2, r, g, args)
-    nll0, step0 = at_sds(np.zeros(3), r, g, args)
+    nll, _ = at_sds(tau2, r2, g2, args)
+    nll0, step0 = at_sds(np.zeros(3), r2, g2, args)
     if not (np.isfinite(nll) and np.isfinite(nll0)):
         # a fit whose levels' covariance is not positive definite (on a fading-horn bench
         # the grid's likelihood was NaN everywhere and the predictions' sd draws failed)
@@ -230,7 +254,7 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
 
     # lack of fit at zero sds: the free levels against the model's best curve
     r0 = r - g @ step0
-    chi2 = float(r0 @ np.linalg.solve(free.cov_y, r0))
+    chi2 = free.cov_parts.quad(r0)  # r0' V^-1 r0
     dof = int(n - k)
     p_value = float(scipy.special.gammaincc(dof / 2.0, chi2 / 2.0)) if dof > 0 else 1.0
 
@@ -246,7 +270,7 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
             grid = np.linspace(0.0, top, GRID)
             t2 = np.tile(tau2, (GRID, 1))
             t2[:, j] = grid**2
-            nl = np.asarray(evaluate(t2, r, g, *args, True)[0])
+            nl = np.asarray(evaluate(t2, r2, g2, *args, True)[0])
             # a grid point whose covariance is not positive definite has no likelihood
             nl = np.where(np.isfinite(nl), nl, np.inf)
             if not np.isfinite(nl.min()):

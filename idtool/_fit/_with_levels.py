@@ -12,6 +12,7 @@ import numpy as np
 
 from idtool._diagnostic import Diagnostic
 from idtool._fit._free_levels import free_levels, model_log_levels
+from idtool._fit._level_design import level_design
 from idtool._fit._reml import GRID, evaluate, fit_sds
 from idtool._fit._result import FitResult, estimate_of
 from idtool._fit._variability import NoMeasuredLevels, estimate_variability
@@ -24,12 +25,14 @@ def compile_variability(result: FitResult) -> None:
     many ON levels are measured), for :func:`estimate_variability` to find compiled;
     run in :class:`~idtool._fit._prefetch.CompileAhead`'s thread."""
     free = free_levels(result.model, result.z, result.phi)
-    n, k = free.y.size, result.model.n_physical
-    r, g = np.zeros(n), np.zeros((n, k))
-    args = (np.eye(n), np.zeros((n, 2)), np.zeros((n, n)))
-    fit_sds.compile_ahead(np.zeros(3), np.zeros(3), r, g, *args)
-    evaluate.compile_ahead(np.zeros((GRID, 3)), r, g, *args, True)
-    evaluate.compile_ahead(np.zeros((1, 3)), r, g, *args, False)  # at_sds: one row
+    assert free.cov_parts is not None  # a fresh free_levels'
+    design = level_design(result.model, free.measured)
+    m, k = free.off_n.size, result.model.n_physical
+    r2, g2 = np.zeros((m, 2)), np.zeros((m, 2, k))
+    args = dataclasses.replace(free.cov_parts, disc=design.disc_root).arrays
+    fit_sds.compile_ahead(np.zeros(3), np.zeros(3), r2, g2, *args)
+    evaluate.compile_ahead(np.zeros((GRID, 3)), r2, g2, *args, True)
+    evaluate.compile_ahead(np.zeros((1, 3)), r2, g2, *args, False)  # at_sds: one row
 
 
 def with_variability(result: FitResult) -> FitResult:

@@ -19,6 +19,8 @@ prior (``--priors``).
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -27,6 +29,7 @@ from jax.scipy.linalg import cho_solve
 from jaxtyping import Array
 
 from idtool._fit._free_levels import FreeLevels
+from idtool._fit._level_cov import factor, solve
 from idtool._fit._level_design import level_design
 from idtool._fit._variability import SD_PARAMS
 from idtool._model._benchmodel import BenchModel
@@ -56,6 +59,11 @@ class LevelsTarget(eqx.Module):
     disc_corr: Array  # (n, n) the discrepancy's correlation between the FR rows
     priors: tuple[Prior, ...] = eqx.field(static=True)
     sd_names: tuple[str, ...] = eqx.field(static=True)
+    # V + Sigma(sds) in per-trace blocks and a low rank (idtool._fit._level_cov: block,
+    # low, disc, measured) and each row's place in the pairs (n,): the likelihood in time
+    # linear in the traces (issue 28); None for a fit saved without them (dense)
+    parts: tuple[Array, Array, Array, Array] | None = None
+    pair_of_row: Array | None = None
 
     @property
     def params(self) -> tuple[Param, ...]:
@@ -77,10 +85,13 @@ class LevelsTarget(eqx.Module):
         for i, (p, prior) in enumerate(zip(params, self.priors, strict=True)):
             v[p.name] = p.value(theta[:, i])
             lp = lp + prior.logpdf(v[p.name]) + p.log_jacobian(theta[:, i])
-        g, chol = _mean_and_cholesky(v, self)
-        r = self.y[None] - g
-        quad = jax.vmap(_quadratic)(chol, r)
-        logdet = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol, axis1=1, axis2=2)), axis=1)
+        if self.parts is None:
+            g, chol = _mean_and_cholesky(v, self)
+            r = self.y[None] - g
+            quad = jax.vmap(_quadratic)(chol, r)
+            logdet = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol, axis1=1, axis2=2)), axis=1)
+        else:
+            quad, logdet = _quad_and_logdet_blocks(v, self)
         out = lp - 0.5 * (quad + logdet)
         out = jnp.where(jnp.isfinite(lp), out, -jnp.inf)
         return jnp.where(jnp.isnan(out), -jnp.inf, out)
@@ -98,6 +109,31 @@ def _mean_and_cholesky(v: dict, target: LevelsTarget) -> tuple[Array, Array]:
     return g, jnp.linalg.cholesky(c)
 
 
+def _log_levels(v: dict, target: LevelsTarget) -> Array:
+    """Per walker the model's log levels at the rows of ``y`` (walkers, n)."""
+    off, _, fr = jax.vmap(target.model.levels)(v)  # (walkers, traces)
+    return jnp.concatenate([jnp.log(off), jnp.log(fr)], axis=1)[:, target.rows]
+
+
+def _quad_and_logdet_blocks(v: dict, target: LevelsTarget) -> tuple[Array, Array]:
+    """Per walker ``r^T C^-1 r`` and ``log det C`` with ``C = V + Sigma(sds)`` in blocks
+    (:mod:`idtool._fit._level_cov`): O(traces) per walker where the dense Cholesky
+    factorisation was O(traces^3)."""
+    parts, pair_of_row = target.parts, target.pair_of_row
+    assert parts is not None and pair_of_row is not None
+    r = target.y[None] - _log_levels(v, target)
+    m = parts[0].shape[0]
+    r2 = jnp.zeros((r.shape[0], 2 * m)).at[:, pair_of_row].set(r).reshape(-1, m, 2)
+    zero = jnp.zeros(r.shape[0])
+    tau2 = jnp.stack([v.get(p.name, zero) ** 2 for p in SD_PARAMS], axis=1)
+
+    def one(t, rp):
+        f = factor(t, *parts)
+        return jnp.sum(rp * solve(f, rp[:, :, None])[:, :, 0]), f[4]
+
+    return jax.vmap(one)(tau2, r2)
+
+
 def _quadratic(chol: Array, x: Array) -> Array:
     """``x^T C^-1 x`` from the Cholesky factor of ``C``."""
     return x @ cho_solve((chol, True), x)
@@ -109,6 +145,13 @@ def build_levels_target(
     """The levels log-posterior of ``model`` from its free levels ``free``."""
     design = level_design(model, free.measured)
     names = tuple(p.name for p in levels_params(model, free))
+    parts: tuple[Array, Array, Array, Array] | None = None
+    pair_of_row = None
+    if free.cov_parts is not None:
+        m, idx = free.off_n.size, np.flatnonzero(free.measured)
+        block, low, disc, meas = dataclasses.replace(free.cov_parts, disc=design.disc_root).arrays
+        parts = (jnp.asarray(block), jnp.asarray(low), jnp.asarray(disc), jnp.asarray(meas))
+        pair_of_row = jnp.asarray(np.concatenate([2 * np.arange(m), 2 * idx + 1]))
     return LevelsTarget(
         model=model,
         y=jnp.asarray(free.y),
@@ -118,6 +161,8 @@ def build_levels_target(
         disc_corr=jnp.asarray(design.disc_corr),
         priors=tuple(priors[n] for n in names),
         sd_names=tuple(n for n in names if n in {p.name for p in SD_PARAMS}),
+        parts=parts,
+        pair_of_row=pair_of_row,
     )
 
 

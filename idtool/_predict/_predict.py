@@ -89,8 +89,9 @@ class Draws:
     def kriging(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Per draw, what the discrepancy's conditional moments need (arguments of
         :func:`~idtool._fit._discrepancy.discrepancy_moments` after ``x_new``): the
-        rows' coordinates and length scales, ``S^-1 (y - g)``, ``S^-1`` and the sd; all
-        zero but the sd without conditioning (the unconditional discrepancy)."""
+        distinct measured points' coordinates and length scales, ``P^T S^-1 (y - g)``,
+        ``P^T S^-1 P`` (:meth:`~idtool._fit._discrepancy.Conditioning.weights`) and the
+        sd; all zero but the sd without conditioning (the unconditional discrepancy)."""
         n = next(iter(self.sds.values())).size if self.sds else self.n
         zero = np.zeros(n)
         sd = self.sds.get("discrepancy_fr", zero)
@@ -104,7 +105,7 @@ class Draws:
         load, alpha, speed = (jnp.asarray(points[:, j]) for j in range(3))
         g = np.log(np.asarray(_fr_draws(self.model, v, load, alpha, speed)))[:, row_point.ravel()]
         weights, s_inv = c.weights(g, sd, self.sds.get("scatter_fr", zero))
-        return c.x, c.scales, weights, s_inv, sd
+        return c.points, c.scales, weights, s_inv, sd
 
     def discrepancy(self, x_new: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Mean and variance of the discrepancy (log FR) at operating points ``x_new``

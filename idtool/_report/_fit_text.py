@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +18,10 @@ from idtool._plotting import MAX_WIDTH_IN, save_figure, subplots
 from idtool._provenance import provenance
 from idtool._version import __version__
 
-__all__ = ["fit_json", "fit_report", "plot_fit"]
+__all__ = ["MAX_TRACE_PANELS", "fit_json", "fit_report", "plot_fit", "shown_traces"]
+
+# Most panels traces.png draws (one per trace): a bench of 96 traces shows its worst 24
+MAX_TRACE_PANELS = 24
 
 # The model is an argument (its data are leaves): one program per dataset shape.
 
@@ -360,26 +364,41 @@ def fit_report(run: FitRun) -> str:
     return "\n".join(lines)
 
 
+def shown_traces(resid_n: np.ndarray, block_trace: np.ndarray, n_traces: int) -> np.ndarray:
+    """Which traces ``traces.png`` draws, in trace order: all of them up to
+    :data:`MAX_TRACE_PANELS`, else the :data:`MAX_TRACE_PANELS` with the largest rms
+    residual [N] (the ones a reader must look at; the others are in ``residuals.png``)."""
+    if n_traces <= MAX_TRACE_PANELS:
+        return np.arange(n_traces)
+    ss = np.bincount(block_trace, weights=resid_n**2, minlength=n_traces)
+    count = np.maximum(np.bincount(block_trace, minlength=n_traces), 1)
+    worst = np.argsort(-(ss / count), kind="stable")[:MAX_TRACE_PANELS]
+    return np.sort(worst)
+
+
 def plot_fit(run: FitRun, out_dir: str | Path) -> list[Path]:
     """``traces.png`` (data and fit, with the 95% band of the block means' noise around
-    the fit: +-1.96 sigma_n / sqrt(1 - phi^2), the AR(1) noise's stationary sd),
+    the fit: +-1.96 sigma_n / sqrt(1 - phi^2), the AR(1) noise's stationary sd; one
+    panel per trace, at most :data:`MAX_TRACE_PANELS`: :func:`shown_traces`),
     ``residuals.png`` and, if profiled, ``profile.png``."""
     r, d = run.chosen, run.data
     out = Path(out_dir)
     pred, w = prediction_at(r.model, r.z, r.phi)
     resid = d.force_n - pred
     half = 1.96 * r.sigma_n / np.sqrt(1.0 - min(r.phi**2, 0.999))
+    shown = shown_traces(resid, np.asarray(d.block_trace), d.n_traces)
     cols = 4
-    rows = int(np.ceil(d.n_traces / cols))
-    height = 2.3 * rows + 0.9
+    rows = int(np.ceil(shown.size / cols))
+    height = 2.3 * rows + 0.9 + (0.3 if shown.size < d.n_traces else 0.0)
     fig, axes = subplots(rows, cols, figsize=(MAX_WIDTH_IN, height), sharex=False, squeeze=False)
     # Fixed margins rather than tight_layout, and few ticks: laying out and ticking 24
     # panels was 2 of the 3 s this figure took, most of a repeated fit's time.
     # (right: room for the last panel's last tick label, half outside its panel)
-    fig.subplots_adjust(left=0.08, right=0.975, bottom=0.5 / height, top=1.0 - 0.75 / height)
+    top = 0.75 + (0.3 if shown.size < d.n_traces else 0.0)
+    fig.subplots_adjust(left=0.08, right=0.975, bottom=0.5 / height, top=1.0 - top / height)
     fig.subplots_adjust(hspace=0.5, wspace=0.3)
-    for i, ax in enumerate(axes.flat):
-        if i >= d.n_traces:
+    for ax, i in itertools.zip_longest(axes.flat, shown):
+        if i is None:
             ax.axis("off")
             continue
         sel = d.block_trace == i
@@ -393,7 +412,23 @@ def plot_fit(run: FitRun, out_dir: str | Path) -> list[Path]:
         ax.locator_params(nbins=3)
     # above the panels, where it hides no data
     handles, labels = axes.flat[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="upper center", ncol=3, fontsize=9, frameon=False)
+    # a bounded figure (96 panels took 8 of a 96-trace fit's 28 s, issue 28) says so
+    note = (
+        f"the {shown.size} of {d.n_traces} traces with the largest rms residual "
+        "(all of them in residuals.png)"
+        if shown.size < d.n_traces
+        else None
+    )
+    fig.legend(
+        handles,
+        labels,
+        loc="upper center",
+        ncol=3,
+        fontsize=9,
+        frameon=False,
+        title=note,
+        title_fontsize=9,
+    )
     fig.supxlabel("time [s]", fontsize=10)
     fig.supylabel("force [N] (block means)", fontsize=10)
     paths = [out / TRACES_PNG.name]
