@@ -156,9 +156,9 @@ def test_sample_and_predict_on_a_folder_without_a_fit(tmp_path, capsys):
 
 
 def test_the_discrepancy_is_conditioned_on_every_measured_row(fit_folder):
-    """``Draws.kriging`` evaluates the model once per distinct operating point and
-    gathers it to the measured rows (one per trace: 8 traces at 4 points here): its
-    weights ``S^-1 (y - g)`` equal those from the model evaluated at every row."""
+    """``Draws.kriging`` evaluates the model once per distinct operating point (8 traces
+    at 4 points here): its weights ``P^T S^-1 (y - g)`` equal those from the model
+    evaluated at the rows, each point's value read from a row measured there."""
     fit = idtool.load_fit(fit_folder)
     d = fit.model.data
     op = np.asarray(d.op_index)
@@ -173,6 +173,12 @@ def test_the_discrepancy_is_conditioned_on_every_measured_row(fit_folder):
     sds = {"discrepancy_fr": np.full(draws.n, 0.03), "scatter_fr": np.full(draws.n, 0.01)}
     c = Conditioning(x, y, 1e-4 * np.eye(8), length_scales(d))
     draws = dataclasses.replace(draws, sds=sds, conditioning=c)
-    weights, s_inv = c.weights(g, sds["discrepancy_fr"], sds["scatter_fr"])
+    # the model at each distinct point, taken from a row measured there (rows of one
+    # point share their inputs): kriging's own evaluation must be the same, in the
+    # order of Conditioning.points
+    points, where = np.unique(x, axis=0, return_inverse=True)
+    first = [int(np.flatnonzero(np.ravel(where) == k)[0]) for k in range(points.shape[0])]
+    np.testing.assert_array_equal(c.points, points)
+    weights, s_inv = c.weights(g[:, first], sds["discrepancy_fr"], sds["scatter_fr"])
     np.testing.assert_allclose(draws.kriging[2], weights, rtol=1e-9, atol=0)
     np.testing.assert_array_equal(draws.kriging[3], s_inv)

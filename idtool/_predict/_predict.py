@@ -99,11 +99,10 @@ class Draws:
         if c is None or not self.sds:
             return np.zeros((1, 3)), np.ones(3), np.zeros((n, 1)), np.zeros((n, 1, 1)), sd
         v = {k: jnp.asarray(x) for k, x in self.values.items()}
-        # one row per measured trace, many at the same operating point (repeats, ON
-        # windows of other lengths): the model's FR once per distinct point, gathered
-        points, row_point = np.unique(np.stack(c.rows, axis=1), axis=0, return_inverse=True)
-        load, alpha, speed = (jnp.asarray(points[:, j]) for j in range(3))
-        g = np.log(np.asarray(_fr_draws(self.model, v, load, alpha, speed)))[:, row_point.ravel()]
+        # the model's FR at the distinct measured points only (Conditioning.rows): many
+        # rows share one (repeats, ON windows of other lengths)
+        load, alpha, speed = (jnp.asarray(r) for r in c.rows)
+        g = np.log(np.asarray(_fr_draws(self.model, v, load, alpha, speed)))
         weights, s_inv = c.weights(g, sd, self.sds.get("scatter_fr", zero))
         return c.points, c.scales, weights, s_inv, sd
 
