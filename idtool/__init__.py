@@ -48,6 +48,9 @@ _LAZY = {
     "write_dataset": "idtool._data._write",
     "IdtoolError": "idtool._errors",
     "Estimate": "idtool._fit._result",
+    "FitArtefact": "idtool._fit._artefact",
+    "LawFit": "idtool._fit._artefact",
+    "ModelSpec": "idtool._model._spec",
     "read_parameter_table": "idtool._fit._parameter_table",
     "ParameterSetting": "idtool._model._settings",
     "ACTUATORS": "idtool._model._actuator",
@@ -167,6 +170,10 @@ if TYPE_CHECKING:
     from idtool._errors import (
         IdtoolError as IdtoolError,
     )
+    from idtool._fit._artefact import (
+        FitArtefact as FitArtefact,
+        LawFit as LawFit,
+    )
     from idtool._fit._parameter_table import (
         read_parameter_table as read_parameter_table,
     )
@@ -242,6 +249,9 @@ if TYPE_CHECKING:
     )
     from idtool._model._settings import (
         ParameterSetting as ParameterSetting,
+    )
+    from idtool._model._spec import (
+        ModelSpec as ModelSpec,
     )
     from idtool._model._transducer import (
         EnergyBalance as EnergyBalance,

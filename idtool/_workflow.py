@@ -59,7 +59,7 @@ class Fit:
 
     Attributes:
         dataset: the :class:`~idtool.Dataset` fitted.
-        artefact: the fit as a typed record (:class:`~idtool._fit._artefact.FitArtefact`).
+        artefact: the fit as a typed record (:class:`idtool.FitArtefact`).
         model: the chosen :class:`~idtool.BenchModel` (law, coupling, noise model).
         estimates: every parameter's :class:`~idtool.Estimate` (value, standard error,
             95% interval, unit), physical ones first.
