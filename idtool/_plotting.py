@@ -39,9 +39,10 @@ MIN_FONT_PT = 9.0
 MODULES = ("matplotlib.figure", "matplotlib.backends.backend_agg", "PIL.PngImagePlugin")
 
 
-def import_in_background() -> threading.Thread:
-    """Start importing :data:`MODULES` in a daemon thread and return it (join it before
-    drawing, or not: an import the caller makes meanwhile waits for the thread's).
+def import_in_background(modules: tuple[str, ...] = MODULES) -> threading.Thread:
+    """Start importing ``modules`` (default :data:`MODULES`) in a daemon thread and
+    return it (join it before drawing, or not: an import the caller makes meanwhile
+    waits for the thread's).
 
     For a command that fits and then draws (``idtool fit``): the fit's main thread
     spends most of its time waiting for XLA's programs, which run without Python's
@@ -49,7 +50,7 @@ def import_in_background() -> threading.Thread:
     before the first figure. An import that fails is left for the drawing to raise."""
 
     def run() -> None:
-        for name in MODULES:
+        for name in modules:
             try:
                 importlib.import_module(name)
             except Exception:  # the drawing imports it again and says why

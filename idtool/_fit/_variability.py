@@ -49,7 +49,6 @@ import dataclasses
 import math
 
 import numpy as np
-import scipy.special
 
 from idtool._diagnostic import Diagnostic
 from idtool._fit._free_levels import MIN_AT_LEVEL_S, FreeLevels, free_levels, model_log_levels
@@ -256,6 +255,10 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
     r0 = r - g @ step0
     chi2 = free.cov_parts.quad(r0)  # r0' V^-1 r0
     dof = int(n - k)
+    # here, not at the top: 0.15-0.25 s of import for one call, which `idtool fit`
+    # makes in the background while XLA runs (idtool._cli._fit, LATE_IMPORTS)
+    import scipy.special
+
     p_value = float(scipy.special.gammaincc(dof / 2.0, chi2 / 2.0)) if dof > 0 else 1.0
 
     sds, grids = {}, {}
