@@ -21,6 +21,8 @@ from typing import Any
 __all__ = [
     "BANNER_CODES",
     "CODES",
+    "DRIFT_CODES",
+    "MISFIT_CODES",
     "SEVERITIES",
     "Diagnostic",
     "banner_label",
@@ -60,17 +62,11 @@ CODES = {
     "extrapolation": "an answer beyond the tested loads or amplitudes",
 }
 
+# The model misses the data beyond their noise; a level drifts within its plateaus.
+MISFIT_CODES = frozenset({"misfit_levels", "misfit_operating_points"})
+DRIFT_CODES = frozenset({"drift_on", "drift_off", "drift_creep", "drift_modelled"})
 # The codes a report raises as red banners before anything else.
-BANNER_CODES = frozenset(
-    {
-        "misfit_levels",
-        "misfit_operating_points",
-        "drift_on",
-        "drift_off",
-        "drift_creep",
-        "drift_modelled",
-    }
-)
+BANNER_CODES = MISFIT_CODES | DRIFT_CODES
 
 
 class Diagnostic(str):

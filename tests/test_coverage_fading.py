@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 
 import idtool
-from idtool._fit._plateau_drift import DRIFT
+from idtool._diagnostic import DRIFT_CODES, with_code
 from idtool._simulate._departures import DEPARTURE_KINDS, DRIFT_KINDS, departure_params
 from idtool._simulate._simulate import true_friction_ratio
 
@@ -62,7 +62,7 @@ def _score(kind: str) -> dict:
         "kind": kind,
         "inside": inside,
         "level": fit.model.level.name,
-        "drift_warning": any(w.startswith(DRIFT) for w in fit.warnings),
+        "drift_warning": bool(with_code(fit.warnings, *DRIFT_CODES)),
         "half_width": float(np.mean([(p.ci95[1] - p.ci95[0]) / 2 for p in fit.predict(*MATRIX)])),
     }
     for name, value in truth.items():

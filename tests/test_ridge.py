@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from idtool._fit._result import Z_AT_BOUND, Estimate
+from idtool._fit._result import Z_AT_BOUND, Estimate, interval_statement, weakly_identified
 from idtool._model._params import Param
 from idtool._posterior._prior import Prior
 from idtool._posterior._ridge import (
@@ -21,6 +21,7 @@ from idtool._posterior._ridge import (
     weak_parameter,
 )
 from idtool._posterior._start import MAX_START_SD_Z, initial_walkers, start_within
+from idtool._report._fit_text import _est
 
 KT = Param("Kt", "N/m", "log", 1e4, 1e13, physical=True)
 GAIN = Param("coupling_gain", "1", "log", 1e-5, 1.0, physical=True)
@@ -170,3 +171,24 @@ def test_the_sheared_coordinates_keep_the_density():
     # recorded with the chain and rebuilt on resume
     again = RidgeTarget.from_doc(target, sheared.to_doc())
     np.testing.assert_array_equal(np.asarray(again.path), np.asarray(sheared.path))
+
+
+def test_an_interval_over_two_decades_is_said_to_be_weakly_identified():
+    # bounded by the data on both sides, but 6.5 decades wide (the "ceiling" bench's
+    # fit, seed 903): said so with its width, and recorded in fit.json
+    e = Estimate("Kt", "N/m", 3e8, 0.0, (1.0e5, 3.2e11))
+    assert e.weakly_identified
+    assert e.statement == "[1e+05, 3.2e+11] (95%; weakly identified: spans 6.5 decades)"
+    assert _est(e)["weakly_identified"] is True and "one_sided" not in _est(e)
+    # two decades exactly is not over them; a one-sided or unidentified one is said so
+    narrow = Estimate("Kt", "N/m", 1e9, 0.0, (1e8, 1e10))
+    assert not narrow.weakly_identified and narrow.statement == "[1e+08, 1e+10]"
+    assert "weakly_identified" not in _est(narrow)
+    for side in ("lower", "upper", "neither"):
+        wide = Estimate("Kt", "N/m", 1e9, 0.0, (1.5e4, 3.8e12), one_sided=side)
+        assert not wide.weakly_identified and "weakly" not in wide.statement
+    # a parameter that can be negative (a slope) is never "weakly identified"
+    assert not weakly_identified(-1.0, 1e3, "")
+    # the caller that knows better overrides the rule (a scatter sd's spike towards zero)
+    assert interval_statement(1e-7, 0.03, "", weak=False) == "[1e-07, 0.03]"
+    assert "weakly" in interval_statement(1e-7, 0.03, "")

@@ -33,7 +33,7 @@ from idtool._diagnostic import Diagnostic
 from idtool._fit._arrow import inverse_and_weakest
 from idtool._fit._lm import LMResult
 from idtool._fit._program import run_lm, unwhiten
-from idtool._fit._result import Estimate, FitResult, estimate_of
+from idtool._fit._result import WEAK_DECADES, Estimate, FitResult, estimate_of
 from idtool._model._actuator import DEFAULT_ACTUATOR
 from idtool._model._benchmodel import BenchModel, bench_model
 from idtool._model._names import DEFAULT_COUPLING, DEFAULT_LEVEL_MODEL
@@ -342,7 +342,7 @@ def _summarise(
                     range=(spec.lo, spec.hi),
                 )
             )
-        elif spec.physical and spec.kind == "log" and hi / max(lo, 1e-300) > 100.0:
+        elif spec.physical and spec.kind == "log" and hi / max(lo, 1e-300) > 10**WEAK_DECADES:
             warnings.append(
                 Diagnostic(
                     "uninformed",

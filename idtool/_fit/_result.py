@@ -16,11 +16,61 @@ from idtool._fit._variability import Variability
 from idtool._model._benchmodel import BenchModel
 from idtool._model._params import Param
 
-__all__ = ["Z95", "Z_AT_BOUND", "Estimate", "FitResult", "estimate_of", "one_sided"]
+__all__ = [
+    "WEAK_DECADES",
+    "Z95",
+    "Z_AT_BOUND",
+    "Estimate",
+    "FitResult",
+    "estimate_of",
+    "interval_statement",
+    "one_sided",
+    "weakly_identified",
+]
 
 Z95 = 1.959963984540054
 # Internal scale: a bounded parameter beyond this sits at its bound (sigmoid > 0.999).
 Z_AT_BOUND = 7.0
+# A positive parameter whose 95% interval spans more decades than this, though the data
+# bound it on both sides, is stated as weakly identified (issue 26): an interval of
+# 100:1 and wider says the data fix the parameter's order of magnitude at best, and a
+# reader who takes its midpoint (Kt's creep and Coulomb plateaus lie 2-4 decades apart,
+# model notes section 4) would be misled. The fit's "uninformed" diagnostic warns at the
+# same width.
+WEAK_DECADES = 2.0
+
+
+def weakly_identified(lo: float, hi: float, side: str) -> bool:
+    """True when a 95% interval bounded by the data on both sides (``side`` is "") of a
+    positive parameter spans more than :data:`WEAK_DECADES` decades."""
+    return side == "" and lo > 0.0 and hi > lo and math.log10(hi / lo) > WEAK_DECADES
+
+
+def interval_statement(
+    lo: float, hi: float, side: str, fmt: str | None = None, *, weak: bool | None = None
+) -> str:
+    """A 95% interval as a reader should take it (:attr:`Estimate.statement`): ``[lo,
+    hi]``; ``> lo`` / ``< hi`` where the data bound the parameter on one side only (the
+    other end is the parameter's range, not information); the range itself said as not
+    identified; an interval over :data:`WEAK_DECADES` decades said as weakly identified,
+    with its width. ``fmt`` formats the numbers (default: four significant digits for a
+    one-sided bound, five for an interval); ``weak`` overrides the weak-identification
+    rule (:func:`weakly_identified`) where the caller knows better (a scatter sd's
+    interval reaching towards zero is its prior's spike)."""
+    fmt = fmt or (".4g" if side else ".5g")
+    weak = weakly_identified(lo, hi, side) if weak is None else weak
+    if side == "lower":
+        return f"> {lo:{fmt}} (95%; not bounded above)"
+    if side == "upper":
+        return f"< {hi:{fmt}} (95%; not bounded below)"
+    if side == "neither":
+        return f"[{lo:{fmt}}, {hi:{fmt}}] (95%; not identified: bounded by its range alone)"
+    if weak:
+        return (
+            f"[{lo:{fmt}}, {hi:{fmt}}] (95%; weakly identified: spans "
+            f"{math.log10(hi / lo):.1f} decades)"
+        )
+    return f"[{lo:{fmt}}, {hi:{fmt}}]"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,18 +92,14 @@ class Estimate:
     one_sided: str = ""
 
     @property
+    def weakly_identified(self) -> bool:
+        """Bounded by the data on both sides, but over :data:`WEAK_DECADES` decades."""
+        return weakly_identified(*self.ci95, self.one_sided)
+
+    @property
     def statement(self) -> str:
-        """The interval as a reader should take it: ``[lo, hi]``, or ``> lo`` / ``< hi``
-        where the data bound the parameter on one side only (the other end is the
-        parameter's range, not information)."""
-        lo, hi = self.ci95
-        if self.one_sided == "lower":
-            return f"> {lo:.4g} (95%; not bounded above)"
-        if self.one_sided == "upper":
-            return f"< {hi:.4g} (95%; not bounded below)"
-        if self.one_sided == "neither":
-            return f"[{lo:.4g}, {hi:.4g}] (95%; not identified: bounded by its range alone)"
-        return f"[{lo:.5g}, {hi:.5g}]"
+        """The interval as a reader should take it (:func:`interval_statement`)."""
+        return interval_statement(*self.ci95, self.one_sided)
 
 
 @dataclasses.dataclass(frozen=True)

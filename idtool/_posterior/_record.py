@@ -14,6 +14,7 @@ import numpy as np
 from idtool._errors import IdtoolError
 from idtool._fit._discrepancy import Conditioning
 from idtool._fit._free_levels import FreeLevels
+from idtool._fit._result import weakly_identified
 from idtool._model._benchmodel import BenchModel
 from idtool._model._params import Param
 from idtool._posterior._diagnostics import Diagnostics
@@ -97,5 +98,9 @@ class PosteriorRecord:
                 "sd": float(np.std(x)),
                 "unit": p.unit,
                 "one_sided": self.one_sided.get(name, ""),
+                # the contact's and coupling's (an sd's interval reaching towards zero
+                # is its spike, not a weak identification)
+                "weakly_identified": p.physical
+                and weakly_identified(float(lo), float(hi), self.one_sided.get(name, "")),
             }
         return out

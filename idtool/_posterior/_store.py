@@ -87,6 +87,8 @@ def inference_data(
         "coupling": post.coupling,
         "diagnostics": post.diagnostics.to_dict(),
         "diagnostic_records": records([*post.warnings, *post.diagnostics.records()]),
+        # the sides the data alone bound, where the sampler profiled (its report's "> lo")
+        "one_sided": dict(post.one_sided),
         "timing": post.timing,
         "idtool_version": __version__,
         "thinning": {

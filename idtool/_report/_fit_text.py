@@ -36,6 +36,8 @@ def _est(e: Estimate) -> dict:
     }
     if e.one_sided:  # the data bound it on this side only ("lower": report "> lo")
         out["one_sided"] = e.one_sided
+    if e.weakly_identified:  # bounded on both sides, but over two decades
+        out["weakly_identified"] = True
     return out | {"fixed": True, "fixed_by": e.fixed_label} if e.fixed else out
 
 

@@ -22,6 +22,7 @@ from idtool._diagnostic import BANNER_CODES, banner_label, from_records, with_co
 from idtool._errors import IdtoolError
 from idtool._fit._artefact import FitArtefact
 from idtool._fit._folder import FIT_JSON, PPC_PNG, REPORT_HTML, REPORT_MD, RESIDUALS_PNG, TRACES_PNG
+from idtool._fit._result import interval_statement
 from idtool._fit._store import load_artefact
 from idtool._fit._summary import VariabilitySummary
 from idtool._posterior._diagnostics import STOP_REASONS, import_arviz
@@ -37,6 +38,7 @@ from idtool._report._figures import (
 )
 from idtool._report._html_validation import validation_banner, validation_section
 from idtool._report._page import (
+    G,
     g,
     img,
     kv_table,
@@ -271,20 +273,16 @@ def write_report(
         for n in [*names, *fixed]:
             e = fit.estimates[n]
             row = [n, meaning.get(n, ""), e.unit, g(e.estimate)]
-            ci = f"[{g(e.ci95[0])}, {g(e.ci95[1])}]"
-            if e.one_sided == "lower":  # the data bound it from below only
-                ci = f"> {g(e.ci95[0])} (not bounded above)"
-            elif e.one_sided == "upper":
-                ci = f"< {g(e.ci95[1])} (not bounded below)"
-            elif e.one_sided == "neither":  # the interval is the parameter's range
-                ci += " (not identified: bounded by its range alone)"
-            row += [ci]
+            # "> lo" where the data bound it on one side only, "not identified" or
+            # "weakly identified" where they barely bound it
+            row += [interval_statement(*e.ci95, e.one_sided, G)]
             if n in fixed:
                 row[-1:] = [e.fixed_label or "fixed by the user", "-", "fixed (not sampled)"]
             elif post is not None and n in post:
                 v = np.asarray(post[n].values).ravel()
                 lo, med, hi = np.percentile(v, [2.5, 50, 97.5])
-                row += [g(med), f"[{g(lo)}, {g(hi)}]"]
+                side = (meta or {}).get("one_sided", {}).get(n, "")  # the sampler's
+                row += [g(med), interval_statement(lo, hi, side, G)]
             else:
                 row += ["-", "no posterior: run idtool sample"]
             rows.append(row)

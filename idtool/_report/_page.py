@@ -15,7 +15,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-__all__ = ["g", "img", "kv_table", "page", "report_id", "signoff", "table"]
+__all__ = ["G", "g", "img", "kv_table", "page", "report_id", "signoff", "table"]
 
 # Screen: one readable column. Print ("print to PDF"): A4 pages with margins, the answer
 # alone on the first page, no section or figure cut across a page break where it fits,
@@ -47,9 +47,12 @@ img{max-height:24cm;width:auto}
 """
 
 
+G = ".4g"  # the report's numbers: four significant digits
+
+
 def g(x: float) -> str:
     """A number in four significant digits."""
-    return f"{x:.4g}"
+    return f"{x:{G}}"
 
 
 def img(path: Path, alt: str) -> str:

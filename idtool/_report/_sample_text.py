@@ -13,7 +13,7 @@ import numpy as np
 from idtool._atomic import write_text_atomic
 from idtool._diagnostic import records
 from idtool._fit._folder import CHAIN_H5, POSTERIOR_NC, PPC_PNG, REPORT_SAMPLE_TXT, SAMPLE_JSON
-from idtool._fit._result import Estimate
+from idtool._fit._result import Estimate, interval_statement
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._plotting import MAX_WIDTH_IN, save_figure, subplots
 from idtool._posterior._groups import model_check_groups
@@ -75,11 +75,10 @@ def sample_report(
         if name in est:
             lo, hi = est[name].ci95
             fit_ci = f"   fit {_fmt(est[name].estimate)} [{_fmt(lo)}, {_fmt(hi)}]"
-        interval = f"[{_fmt(s['ci95'][0])}, {_fmt(s['ci95'][1])}]"
-        if s.get("one_sided"):  # the data bound it on one side only: said as the fit's
-            ci = (s["ci95"][0], s["ci95"][1])
-            one = Estimate(name, s["unit"], s["median"], s["sd"], ci, one_sided=s["one_sided"])
-            interval = one.statement
+        # said as the fit's: "> lo" where the data bound it on one side only, "weakly
+        # identified" over two decades
+        lo, hi = s["ci95"]
+        interval = interval_statement(lo, hi, s["one_sided"], weak=s["weakly_identified"])
         lines.append(f"    {name:20s}{_fmt(s['median']):>12s} {s['unit']:4s} {interval}{fit_ci}")
     lines += ["[[Diagnostics]]", post.diagnostics.report()]
     if isinstance(check, LevelsCheck):
