@@ -13,6 +13,8 @@ from idtool._model._params import Param
 from idtool._posterior._prior import Prior
 from idtool._posterior._ridge import (
     RIDGE_POINTS,
+    RIDGE_REFINE_LEVELS,
+    RIDGE_REFINE_WITHIN,
     Ridge,
     RidgeTarget,
     open_sides,
@@ -110,8 +112,15 @@ def test_the_profile_follows_the_curved_ridge_to_the_other_plateau():
     target = TwoPlateaus()
     # started on one plateau
     ridge = ridge_profile(_batched(target), target, np.array([-3.0, 1.0]), 0)
-    assert ridge.grid.size == RIDGE_POINTS
     assert ridge.grid[0] == -Z_AT_BOUND and ridge.grid[-1] == Z_AT_BOUND
+    # the coarse points, and a quarter unit apart wherever the posterior has mass
+    coarse = np.linspace(-Z_AT_BOUND, Z_AT_BOUND, RIDGE_POINTS)
+    assert np.all(np.isin(coarse, ridge.grid)) and np.all(np.diff(ridge.grid) > 0)
+    step = 0.5**RIDGE_REFINE_LEVELS * (coarse[1] - coarse[0])
+    massive = np.maximum(ridge.log_post[:-1], ridge.log_post[1:])
+    massive = massive > np.max(ridge.log_post) - RIDGE_REFINE_WITHIN + 1.0
+    assert massive.sum() > RIDGE_POINTS
+    np.testing.assert_allclose(np.diff(ridge.grid)[massive], step)
     # every profile point on the ridge (the other plateau's gain is 21 sds away); the
     # gain's own prior and Jacobian move the posterior's maximum off the likelihood's by
     # 4e-4 (sd^2 times their slope), a fiftieth of the ridge's sd
@@ -127,6 +136,18 @@ def test_the_profile_follows_the_curved_ridge_to_the_other_plateau():
     centres, spread = ridge_walkers(ridge, np.diag([0.25, 1e-4]), 64, np.random.default_rng(1))
     assert np.sum(centres[:, 0] < -1.0) >= 10 and np.sum(centres[:, 0] > 1.0) >= 10
     assert spread[0, 1] == 0.0 and spread[0, 0] < 1e-10
+
+
+def test_walkers_start_in_proportion_to_the_profiles_mass_on_an_uneven_grid():
+    # a flat profile, refined on its left half: the walkers still spread evenly in z
+    grid = np.concatenate([np.linspace(-7.0, 0.0, 29), np.linspace(1.0, 7.0, 7)])
+    flat = Ridge(0, grid, np.zeros((grid.size, 2)), np.zeros(grid.size), np.zeros(grid.size))
+    centres, _ = ridge_walkers(flat, np.eye(2), 4000, np.random.default_rng(2))
+    left = np.mean(centres[:, 0] < 0.0)
+    # the cells reach halfway to their neighbours, a half cell beyond the ends: 7.125 of
+    # 14.625 units lie left of 0; binomial sd sqrt(0.25 / 4000) = 0.008
+    assert abs(left - 7.125 / 14.625) < 0.03
+    assert centres[:, 0].min() >= -7.125 and centres[:, 0].max() <= 7.5
 
 
 def _ridge(log_lik):

@@ -36,10 +36,13 @@ from jaxtyping import Array
 
 from idtool._fit._result import Z95, Z_AT_BOUND, one_sided
 from idtool._model._params import Param
+from idtool._posterior._ridge_jump import cell_edges, ridge_jump
 
 __all__ = [
     "RIDGE_DECADES",
     "RIDGE_POINTS",
+    "RIDGE_REFINE_LEVELS",
+    "RIDGE_REFINE_WITHIN",
     "Ridge",
     "RidgeTarget",
     "open_sides",
@@ -59,6 +62,16 @@ RIDGE_DECADES = 0.5
 # Profile points over the internal range [-Z_AT_BOUND, Z_AT_BOUND] (one internal unit
 # apart: the valley between Kt's plateaus is about one wide).
 RIDGE_POINTS = 15
+# Where the posterior has mass the profile is then refined, each cell whose log-density
+# reaches within RIDGE_REFINE_WITHIN of the top halved RIDGE_REFINE_LEVELS times (a
+# quarter unit apart there). The sheared coordinates follow the profile linearly between
+# its points, and one internal unit of Kt is 2.25 decades in the middle of its range:
+# on the "all" bench (seed 602, Kt's posterior about three decades wide) a kink of the
+# coarse path inside the mass slowed the chain to 16,610 steps (slowest tau 124,
+# coupling_gain); refined, 3,164 steps (tau 50) for 35 more maximisations (5 s).
+# e^-8 = 3e-4: cells below that hold no walker's start and next to no posterior mass.
+RIDGE_REFINE_WITHIN = 8.0
+RIDGE_REFINE_LEVELS = 2
 _CHI2_95 = 3.84  # -2 log L rise at a 95% interval's end, one parameter (as the fit's)
 # Central-difference step on the internal scale: truncation error ~ step^2 (1e-10),
 # rounding ~ 1e-16 |log-posterior| / step (2e-9 at 200)
@@ -143,11 +156,12 @@ def ridge_profile(
 ) -> Ridge:
     """The log-posterior ``log_post`` (batched, (n, ndim) -> (n,)) of ``target`` (a
     :class:`~idtool._posterior._levels.LevelsTarget`: its parameters and priors) profiled
-    along parameter ``index`` over :data:`RIDGE_POINTS` internal values spanning
-    its range (:class:`Ridge`): walking out from the point nearest ``theta`` in both
-    directions, each maximisation (:func:`_maximise_others`) warm-started from its
-    neighbour's, so the profile follows the ridge from one plateau to the other (the
-    other plateau's coupling gain is 10 of its sds away from the fit's)."""
+    along parameter ``index`` (:class:`Ridge`): over :data:`RIDGE_POINTS` internal values
+    spanning its range, walking out from the point nearest ``theta`` in both directions,
+    each maximisation (:func:`_maximise_others`) warm-started from its neighbour's, so
+    the profile follows the ridge from one plateau to the other (the other plateau's
+    coupling gain is 10 of its sds away from the fit's); then refined where the
+    posterior has mass (:func:`_refined`)."""
     grid = np.linspace(-Z_AT_BOUND, Z_AT_BOUND, RIDGE_POINTS)
     theta = np.array(theta, float)
     theta[index] = float(np.clip(theta[index], -Z_AT_BOUND, Z_AT_BOUND))
@@ -161,9 +175,39 @@ def ridge_profile(
             out[j], lp[j] = _maximise_others(x, index, log_post)
             if np.isfinite(lp[j]):
                 x = out[j].copy()
+    for _ in range(RIDGE_REFINE_LEVELS):
+        grid, out, lp = _refined(grid, out, lp, index, log_post)
     p, prior = target.params[index], target.priors[index]
     own = np.array([float(prior.logpdf(p.value(g))) + float(p.log_jacobian(g)) for g in grid])
     return Ridge(index, grid, out, lp, lp - own)
+
+
+def _refined(
+    grid: np.ndarray,
+    theta: np.ndarray,
+    lp: np.ndarray,
+    index: int,
+    log_post: Callable[[np.ndarray], np.ndarray],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The profile with a point added in the middle of each cell whose log-density
+    reaches within :data:`RIDGE_REFINE_WITHIN` of the top, maximised from its two
+    neighbours' mean (their ridge is continuous between them)."""
+    top = float(np.max(lp))
+    cells = np.flatnonzero(np.maximum(lp[:-1], lp[1:]) > top - RIDGE_REFINE_WITHIN)
+    ok = np.isfinite(lp[cells]) & np.isfinite(lp[cells + 1])
+    cells = cells[ok]
+    new = []
+    for j in cells:
+        x = 0.5 * (theta[j] + theta[j + 1])
+        x[index] = 0.5 * (grid[j] + grid[j + 1])
+        new.append(_maximise_others(x, index, log_post))
+    if not new:
+        return grid, theta, lp
+    grid = np.concatenate([grid, 0.5 * (grid[cells] + grid[cells + 1])])
+    theta = np.concatenate([theta, np.array([t for t, _ in new])])
+    lp = np.concatenate([lp, np.array([v for _, v in new])])
+    order = np.argsort(grid, kind="stable")
+    return grid[order], theta[order], lp[order]
 
 
 def open_sides(ridge: Ridge) -> str:
@@ -185,17 +229,17 @@ def ridge_walkers(
     ridge: Ridge, cov: np.ndarray, walkers: int, rng: np.random.Generator
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each walker's centre (walkers, ndim): a profile point drawn in proportion to the
-    profile's density (``exp(log_post)``, the points equally spaced), the profiled
-    parameter spread uniformly over its cell; and the covariance of the walkers' spread
+    profile's mass in its cell (``exp(log_post)`` times the cell's width: the points are
+    closer where the profile was refined), the profiled parameter spread uniformly over
+    the cell (halfway to each neighbour); and the covariance of the walkers' spread
     around their centres (``cov`` without the profiled parameter's correlations, a tenth
     of its variance: the profile already follows the ridge)."""
-    lp = ridge.log_post
-    w = np.exp(lp - np.max(lp))
+    edges = cell_edges(ridge.grid)
+    w = np.exp(ridge.log_post - np.max(ridge.log_post)) * np.diff(edges)
     w = np.where(np.isfinite(w), w, 0.0)
     pick = rng.choice(ridge.grid.size, size=walkers, p=w / w.sum())
     centres = ridge.theta[pick].copy()
-    step = float(ridge.grid[1] - ridge.grid[0])
-    centres[:, ridge.index] += rng.uniform(-0.5 * step, 0.5 * step, walkers)
+    centres[:, ridge.index] = rng.uniform(edges[pick], edges[pick + 1])
     spread = 0.1 * np.asarray(cov, float)
     spread[ridge.index, :] = 0.0
     spread[:, ridge.index] = 0.0
@@ -216,6 +260,9 @@ class RidgeTarget(eqx.Module):
     index: int = eqx.field(static=True)
     grid: Array  # (points,) the profiled parameter's internal values
     path: Array  # (points, ndim): the maximising vectors, the profiled column zero
+    # (points,) the profile's log-density (failed points 50 below its lowest): the
+    # ridge-jump move's proposal (idtool._posterior._ridge_jump)
+    log_post: Array
 
     @classmethod
     def along(cls, base: Any, ridge: Ridge) -> RidgeTarget:
@@ -226,22 +273,33 @@ class RidgeTarget(eqx.Module):
             [np.interp(ridge.grid, ridge.grid[ok], c[ok]) for c in ridge.theta.T], axis=1
         )
         path[:, ridge.index] = 0.0
-        return cls(base, ridge.index, jnp.asarray(ridge.grid), jnp.asarray(path))
+        lp = np.where(ok, ridge.log_post, np.min(ridge.log_post[ok]) - 50.0)
+        return cls(base, ridge.index, jnp.asarray(ridge.grid), jnp.asarray(path), jnp.asarray(lp))
 
     @classmethod
     def from_doc(cls, base: Any, doc: dict) -> RidgeTarget:
-        """Rebuilt from :meth:`to_doc` (a resumed chain)."""
-        return cls(base, int(doc["index"]), jnp.asarray(doc["grid"]), jnp.asarray(doc["path"]))
+        """Rebuilt from :meth:`to_doc` (a resumed chain; a chain sampled before the
+        profile's density was recorded proposes uniformly along the ridge)."""
+        grid = jnp.asarray(doc["grid"])
+        lp = jnp.asarray(doc["log_post"]) if "log_post" in doc else jnp.zeros_like(grid)
+        return cls(base, int(doc["index"]), grid, jnp.asarray(doc["path"]), lp)
 
     def to_doc(self) -> dict:
         """The shear as data (recorded with the chain, which holds the sheared ``x``:
-        ``theta[:, k] = x[:, k] + interp(x[:, index], grid, path[:, k])``)."""
+        ``theta[:, k] = x[:, k] + interp(x[:, index], grid, path[:, k])``), and the
+        profile's log-density at ``grid``."""
         return {
             "index": self.index,
             "grid": np.asarray(self.grid).tolist(),
             "path": np.asarray(self.path).tolist(),
+            "log_post": np.asarray(self.log_post).tolist(),
             "formula": "theta[k] = x[k] + interp(x[index], grid, path[:, k])",
         }
+
+    def jump_move(self):
+        """The move that redraws the profiled coordinate along the ridge
+        (:func:`idtool._posterior._ridge_jump.ridge_jump`)."""
+        return ridge_jump(self.index, np.asarray(self.grid), np.asarray(self.log_post))
 
     @property
     def params(self) -> tuple[Param, ...]:

@@ -312,7 +312,7 @@ def sample_posterior(
     try:
         diag, sample_s = run_chain(
             lambda backend: emcee.EnsembleSampler(
-                walkers, ndim, fn, vectorize=True, backend=backend, moves=_moves(noise)
+                walkers, ndim, fn, vectorize=True, backend=backend, moves=_moves(noise, sheared)
             ),
             initial,
             store,
