@@ -20,7 +20,7 @@ Run: ``.venv/bin/python benchmarks/bench_scaling.py [--counts 12 24 48 96 384]
 ``--e2e``: ``idtool fit`` end to end instead (command line, defaults: the laws and
 actuators compared, the levels model, the figures), each count written as a dataset and
 fitted twice, the second timed (the first fills the compilation caches for its shapes);
-wall time of the process and its peak memory.
+wall time of the process, its CPU time (user + system) and its peak memory.
 
 Measured 2026-11-25, load average 6-10 on 2 CPUs (other jobs; the timings are noisy),
 before the OFF switch of the slope actuator was rounded: fit + checks 0.9, 12.4, 19.8,
@@ -108,8 +108,9 @@ import json, resource, sys
 from idtool._cli._main import console
 sys.argv = ["idtool", "fit", sys.argv[1], "--out", sys.argv[2], "--force", "-q"]
 code = console()
-print(json.dumps({"code": code,
-    "peak_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6}))
+use = resource.getrusage(resource.RUSAGE_SELF)
+print(json.dumps({"code": code, "peak_gb": use.ru_maxrss / 1e6,
+    "user_s": use.ru_utime, "sys_s": use.ru_stime}))
 """
 
 
@@ -163,7 +164,12 @@ def run_e2e(n: int, folder: Path) -> dict | None:
             return None
     assert out is not None
     row = json.loads(out.stdout.strip().splitlines()[-1])
-    return {"traces": n, "seconds": wall, "peak_gb": row["peak_gb"]}
+    return {
+        "traces": n,
+        "seconds": wall,
+        "peak_gb": row["peak_gb"],
+        "cpu_s": row["user_s"] + row["sys_s"],
+    }
 
 
 def exponent(rows: list[dict]) -> float:
@@ -220,14 +226,15 @@ def main() -> int:
 def main_e2e(counts: list[int]) -> int:
     """``--e2e``: :func:`run_e2e` per trace count, and the exponent."""
     rows = []
-    print(f"{'traces':>6}  {'idtool fit s':>12} {'GB':>5}")
+    print(f"{'traces':>6}  {'idtool fit s':>12} {'CPU s':>6} {'GB':>5}")
     with tempfile.TemporaryDirectory() as tmp:
         for n in counts:
             r = run_e2e(n, Path(tmp))
             if r is None:
                 return 1
             rows.append(r)
-            print(f"{n:>6}  {r['seconds']:>12.1f} {r['peak_gb']:>5.2f}", flush=True)
+            cells = f"{r['seconds']:>12.1f} {r['cpu_s']:>6.1f} {r['peak_gb']:>5.2f}"
+            print(f"{n:>6}  {cells}", flush=True)
     if len(rows) >= 2:
         print(f"idtool fit: time ~ traces^{exponent(rows):.2f}")
     return 0

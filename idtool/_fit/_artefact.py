@@ -30,6 +30,7 @@ from idtool._data._blocks import FitData
 from idtool._data._dataset import Dataset
 from idtool._diagnostic import Diagnostic, from_records
 from idtool._errors import IdtoolError
+from idtool._fit._cov import Covariance, covariance_from_state, covariance_state
 from idtool._fit._discrepancy import Conditioning
 from idtool._fit._folder import FIT_STATE
 from idtool._fit._free_levels import FreeLevels
@@ -56,14 +57,15 @@ Levels = tuple[FreeLevels, dict[str, tuple[float, float, float]]]
 @dataclasses.dataclass(frozen=True)
 class LawFit:
     """One coupling law's fit, what predictions and the sampler need of it: its model,
-    optimum ``z`` (internal scale, all parameters), covariance ``cov_z``, noise
+    optimum ``z`` (internal scale, all parameters), covariance ``cov_z`` (in blocks, or
+    dense from a folder written before them: :mod:`idtool._fit._cov`), noise
     parameters ``phi`` and ``sigma_n`` [N], and the levels model's sd grids (name ->
     (sd values, posterior probabilities)) and state (free levels, sds), or none."""
 
     spec: ModelSpec
     model: BenchModel = dataclasses.field(repr=False)
     z: np.ndarray
-    cov_z: np.ndarray = dataclasses.field(repr=False)
+    cov_z: Covariance = dataclasses.field(repr=False)
     phi: float
     sigma_n: float
     sd_grids: SdGrids = dataclasses.field(default_factory=dict, repr=False)
@@ -135,13 +137,14 @@ class FitArtefact:
 
 def state_arrays(result: FitResult) -> dict[str, np.ndarray]:
     """A fit's internal state as ``fit_state*.npz`` holds it: the vector ``z`` and its
-    covariance, ``phi``, ``sigma_n`` [N], the parameter names, the multi-start's optima
-    (``optima_rss`` [N^2], ``optima_z``: their physical blocks, internal scale) and the
-    levels model's sd grids and state."""
+    covariance (in blocks, :func:`~idtool._fit._cov.covariance_state`), ``phi``,
+    ``sigma_n`` [N], the parameter names, the multi-start's optima (``optima_rss``
+    [N^2], ``optima_z``: their physical blocks, internal scale) and the levels model's
+    sd grids and state."""
     k = result.model.n_physical
     arrays: dict[str, np.ndarray] = {
         "z": np.asarray(result.z),
-        "cov_z": np.asarray(result.cov_z),
+        **covariance_state(result.cov_z),  # its blocks (since issue 28: never (p, p))
         "phi": np.array(result.phi),
         "sigma_n": np.array(result.sigma_n),
         "names": np.array(result.model.names),
@@ -208,7 +211,7 @@ def _law_fit(spec: ModelSpec, data: FitData, state: Mapping[str, np.ndarray], wh
         spec=spec,
         model=model,
         z=np.asarray(state["z"]),
-        cov_z=np.asarray(state["cov_z"]),
+        cov_z=covariance_from_state(state, model.n_shared),
         phi=float(state["phi"]),
         sigma_n=float(state["sigma_n"]),
         sd_grids={
