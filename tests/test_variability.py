@@ -16,6 +16,7 @@ from idtool._fit import _reml as reml
 from idtool._fit._discrepancy import Conditioning, correlation, discrepancy_moments
 from idtool._fit._free_levels import INFORMED_ON, _free_step, _linearise
 from idtool._fit._program import u_normal_equations
+from idtool._posterior._groups import _levels_terms, trace_rows
 from idtool._posterior._levels import (
     SD_PRIOR,
     _mean_and_cholesky,
@@ -23,6 +24,7 @@ from idtool._posterior._levels import (
     _quadratic,
     build_levels_target,
     levels_params,
+    replicate_in_blocks,
 )
 from idtool._predict._predict import Draws, with_variability
 
@@ -250,3 +252,71 @@ def test_levels_posterior_in_blocks_is_the_dense_one(example_fits):
         np.asarray(dense.log_posterior_batch(jnp.asarray(theta))),
         rtol=1e-10,
     )
+
+
+def test_levels_replicates_in_blocks_are_the_dense_gaussian(example_fits):
+    """The posterior predictive check's replicated levels drawn on ``V + Sigma(sds)`` in
+    blocks (a per-trace part and a low-rank part, issue 28) are the dense Gaussian
+    ``g + chol(C) eps``: the same mean, and the covariance the linear map from ``eps``
+    implies is ``C``; the discrepancies and each trace's leave-one-out terms (``C^-1``'s
+    diagonal blocks) are the dense ones."""
+    on, _ = example_fits
+    model, free = on.model, on.result.variability.free
+    names = [p.name for p in levels_params(model, free)]
+    priors = dict.fromkeys(names, SD_PRIOR)
+    blocks = build_levels_target(model, free, priors)
+    dense = build_levels_target(model, dataclasses.replace(free, cov_parts=None), priors)
+    rng = np.random.default_rng(6)
+    k, walkers = model.n_physical, 3
+    z = np.asarray(on.result.z)[:k]
+    theta = np.column_stack(
+        [
+            z[i] + 0.01 * rng.normal(size=walkers) if i < k else rng.uniform(0, 2, walkers)
+            for i in range(len(names))
+        ]
+    )
+    v = {p.name: p.value(jnp.asarray(theta[:, i])) for i, p in enumerate(blocks.params)}
+    g_ref, chol = (np.asarray(a) for a in _mean_and_cholesky(v, dense))
+    c_ref = np.einsum("wij,wkj->wik", chol, chol)
+    size = blocks.noise_size
+    assert blocks.parts is not None and dense.noise_size == dense.y.size
+    m, r = model.data.n_traces, blocks.parts[1].shape[2] + blocks.parts[2].shape[2]
+    assert size == 2 * m + r  # two per trace, one per low-rank column
+
+    @jax.jit
+    def noise(e):  # y_rep - g for the same eps at every walker: linear in eps
+        g, y_rep, *_ = replicate_in_blocks(v, blocks, jnp.broadcast_to(e, (walkers, size)))
+        return y_rep - g
+
+    basis = np.asarray(jax.vmap(noise)(jnp.eye(size)))  # (size, walkers, n)
+    for w in range(walkers):
+        implied = basis[:, w].T @ basis[:, w]
+        scale = np.abs(c_ref[w]).max()
+        np.testing.assert_allclose(implied, c_ref[w], rtol=0, atol=1e-10 * scale)
+    eps = rng.standard_normal((walkers, size))
+    g, y_rep, a, prec, d_obs, d_rep = (
+        np.asarray(x) for x in replicate_in_blocks(v, blocks, jnp.asarray(eps))
+    )
+    np.testing.assert_allclose(g, g_ref, rtol=1e-12)
+    y = np.asarray(dense.y)
+    want_obs = [(y - g_ref[w]) @ np.linalg.solve(c_ref[w], y - g_ref[w]) for w in range(walkers)]
+    rep = y_rep - g
+    want_rep = [rep[w] @ np.linalg.solve(c_ref[w], rep[w]) for w in range(walkers)]
+    np.testing.assert_allclose(d_obs, want_obs, rtol=1e-9)
+    np.testing.assert_allclose(d_rep, want_rep, rtol=1e-9)
+    idx, mask = (np.asarray(x) for x in trace_rows(dense))
+    for w in range(walkers):
+        inv = np.linalg.inv(c_ref[w])
+        want_a = inv @ (y - g_ref[w])
+        np.testing.assert_allclose(
+            np.where(mask, a[w], 0.0), np.where(mask, want_a[idx], 0.0), rtol=1e-8, atol=1e-12
+        )
+        both = mask[:, :, None] & mask[:, None, :]
+        want_p = inv[idx[:, :, None], idx[:, None, :]]
+        np.testing.assert_allclose(
+            np.where(both, prec[w], 0.0), np.where(both, want_p, 0.0), rtol=1e-9, atol=0
+        )
+    ll_blocks, _ = _levels_terms(jnp.asarray(theta), blocks, jnp.asarray(eps), idx, mask)
+    eps_dense = jnp.asarray(rng.standard_normal((walkers, dense.noise_size)))
+    ll_dense, _ = _levels_terms(jnp.asarray(theta), dense, eps_dense, idx, mask)
+    np.testing.assert_allclose(np.asarray(ll_blocks), np.asarray(ll_dense), rtol=1e-9)
