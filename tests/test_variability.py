@@ -214,7 +214,12 @@ def test_free_levels_in_blocks_are_the_dense_solution(example_fits):
     cov_y = dy @ cov_u @ dy.T
     np.testing.assert_allclose(u, ref, rtol=1e-10, atol=1e-12)
     assert free.sigma_n == pytest.approx(math.sqrt(sigma2), rel=1e-10)
-    np.testing.assert_allclose(free.cov_y, cov_y, rtol=0, atol=1e-10 * np.abs(cov_y).max())
+    assert free.cov_y is None  # in its blocks alone (issue 28), dense on demand
+    got = free.covariance()
+    np.testing.assert_allclose(got, cov_y, rtol=0, atol=1e-10 * np.abs(cov_y).max())
+    np.testing.assert_allclose(free.variances(), np.diag(got), rtol=1e-14)
+    idx = m + np.arange(free.measured.sum())
+    np.testing.assert_allclose(free.fr_covariance(), got[np.ix_(idx, idx)], rtol=1e-14, atol=0)
     r = np.random.default_rng(1).normal(size=cov_y.shape[0])
     assert free.cov_parts is not None
     assert free.cov_parts.quad(r) == pytest.approx(r @ np.linalg.solve(cov_y, r), rel=1e-8)
@@ -230,7 +235,8 @@ def test_levels_posterior_in_blocks_is_the_dense_one(example_fits):
     names = [p.name for p in levels_params(model, free)]
     priors = dict.fromkeys(names, SD_PRIOR)
     blocks = build_levels_target(model, free, priors)
-    dense = build_levels_target(model, dataclasses.replace(free, cov_parts=None), priors)
+    unblocked = dataclasses.replace(free, cov_y=free.covariance(), cov_parts=None)
+    dense = build_levels_target(model, unblocked, priors)
     assert blocks.parts is not None and dense.parts is None
     rng = np.random.default_rng(5)
     k = model.n_physical
@@ -265,7 +271,8 @@ def test_levels_replicates_in_blocks_are_the_dense_gaussian(example_fits):
     names = [p.name for p in levels_params(model, free)]
     priors = dict.fromkeys(names, SD_PRIOR)
     blocks = build_levels_target(model, free, priors)
-    dense = build_levels_target(model, dataclasses.replace(free, cov_parts=None), priors)
+    unblocked = dataclasses.replace(free, cov_y=free.covariance(), cov_parts=None)
+    dense = build_levels_target(model, unblocked, priors)
     rng = np.random.default_rng(6)
     k, walkers = model.n_physical, 3
     z = np.asarray(on.result.z)[:k]

@@ -163,10 +163,11 @@ def state_arrays(result: FitResult) -> dict[str, np.ndarray]:
             "levels_on_n": free.on_n,
             "levels_measured": free.measured,
             "levels_y": free.y,
-            "levels_cov_y": free.cov_y,
             "levels_sigma_n": np.array(free.sigma_n),
         }
-        if free.cov_parts is not None:  # cov_y in blocks: the sampler's likelihood
+        if free.cov_y is not None:  # dense: a folder written before the blocks, resaved
+            arrays["levels_cov_y"] = free.cov_y
+        if free.cov_parts is not None:  # y's covariance in blocks (never (n, n))
             arrays |= {
                 "levels_cov_block": free.cov_parts.block,
                 "levels_cov_low": free.cov_parts.low,
@@ -197,7 +198,7 @@ def _law_fit(spec: ModelSpec, data: FitData, state: Mapping[str, np.ndarray], wh
             on_n=np.asarray(state["levels_on_n"]),
             measured=np.asarray(state["levels_measured"]).astype(bool),
             y=np.asarray(state["levels_y"]),
-            cov_y=np.asarray(state["levels_cov_y"]),
+            cov_y=np.asarray(state["levels_cov_y"]) if "levels_cov_y" in state else None,
             sigma_n=float(state["levels_sigma_n"]),
             cov_parts=_cov_parts(state),
         )

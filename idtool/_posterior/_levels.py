@@ -59,10 +59,12 @@ class LevelsTarget(eqx.Module):
 
     model: BenchModel
     y: Array  # log OFF of every trace, log FR of the measured ones
-    cov_y: Array
+    # y's covariance V dense (n, n): only for a fit saved without the blocks (parts)
+    cov_y: Array | None
     rows: Array  # rows of (log OFF, log FR) per trace that y holds
     kinds: Array  # (n, 2) one-hot: an OFF row, an FR row
-    disc_corr: Array  # (n, n) the discrepancy's correlation between the FR rows
+    # (n, n) the discrepancy's correlation between the FR rows: as cov_y, dense path only
+    disc_corr: Array | None
     priors: tuple[Prior, ...] = eqx.field(static=True)
     sd_names: tuple[str, ...] = eqx.field(static=True)
     # V + Sigma(sds) in per-trace blocks and a low rank (idtool._fit._level_cov: block,
@@ -121,6 +123,7 @@ def _mean_and_cholesky(v: dict, target: LevelsTarget) -> tuple[Array, Array]:
     zero = jnp.zeros(g.shape[0])
     tau2 = [v.get(p.name, zero) ** 2 for p in SD_PARAMS]
     diag = target.kinds[:, 0] * tau2[0][:, None] + target.kinds[:, 1] * tau2[1][:, None]
+    assert target.cov_y is not None and target.disc_corr is not None  # the dense path
     c = target.cov_y + jax.vmap(jnp.diag)(diag) + tau2[2][:, None, None] * target.disc_corr[None]
     return g, jnp.linalg.cholesky(c)
 
@@ -196,8 +199,10 @@ def build_levels_target(
     design = level_design(model, free.measured)
     names = tuple(p.name for p in levels_params(model, free))
     parts: tuple[Array, Array, Array, Array] | None = None
-    pair_of_row = None
-    if free.cov_parts is not None:
+    pair_of_row = cov_y = disc_corr = None
+    if free.cov_parts is None:  # a fit saved before the blocks: dense (n, n)
+        cov_y, disc_corr = jnp.asarray(free.covariance()), jnp.asarray(design.disc_corr())
+    else:
         m, idx = free.off_n.size, np.flatnonzero(free.measured)
         block, low, disc, meas = dataclasses.replace(free.cov_parts, disc=design.disc_root).arrays
         parts = (jnp.asarray(block), jnp.asarray(low), jnp.asarray(disc), jnp.asarray(meas))
@@ -205,10 +210,10 @@ def build_levels_target(
     return LevelsTarget(
         model=model,
         y=jnp.asarray(free.y),
-        cov_y=jnp.asarray(free.cov_y),
+        cov_y=cov_y,
         rows=jnp.asarray(design.rows),
         kinds=jnp.asarray(design.kinds),
-        disc_corr=jnp.asarray(design.disc_corr),
+        disc_corr=disc_corr,
         priors=tuple(priors[n] for n in names),
         sd_names=tuple(n for n in names if n in {p.name for p in SD_PARAMS}),
         parts=parts,
