@@ -15,6 +15,7 @@ import idtool
 from idtool._fit import _reml as reml
 from idtool._fit._discrepancy import Conditioning, correlation, discrepancy_moments
 from idtool._fit._free_levels import INFORMED_ON, _free_step, _linearise
+from idtool._fit._level_design import discrepancy_conditioning
 from idtool._fit._program import u_normal_equations
 from idtool._posterior._groups import _levels_terms, trace_rows
 from idtool._posterior._levels import (
@@ -327,3 +328,31 @@ def test_levels_replicates_in_blocks_are_the_dense_gaussian(example_fits):
     eps_dense = jnp.asarray(rng.standard_normal((walkers, dense.noise_size)))
     ll_dense, _ = _levels_terms(jnp.asarray(theta), dense, eps_dense, idx, mask)
     np.testing.assert_allclose(np.asarray(ll_blocks), np.asarray(ll_dense), rtol=1e-9)
+
+
+def test_discrepancy_conditioning_in_blocks_is_the_dense_one(example_fits):
+    """The kriging weights with ``V`` in blocks (its diagonal and rank-``q`` part, inverted
+    by Woodbury per draw; issue 28) against ``V`` dense (diagonalised once), at draws of
+    both sds: the example's levels fit, and a random ``V`` of 12 rows with repeats."""
+    on, _ = example_fits
+    model, free = on.model, on.result.variability.free
+    blocks = discrepancy_conditioning(model, free)
+    dense = discrepancy_conditioning(
+        model, dataclasses.replace(free, cov_y=free.covariance(), cov_parts=None)
+    )
+    assert blocks.v is None and blocks.v_low is not None and dense.v is not None
+    rng = np.random.default_rng(8)
+    x = np.concatenate([dense.x, dense.x[::-1]])
+    n = x.shape[0]
+    low = 0.01 * rng.normal(size=(n, 3))
+    diag = rng.uniform(1e-6, 4e-6, n)
+    y = rng.normal(0, 0.05, n)
+    random_blocks = Conditioning(x, y, None, dense.scales, diag, low)
+    random_dense = Conditioning(x, y, np.diag(diag) + low @ low.T, dense.scales)
+    for b, d in ((blocks, dense), (random_blocks, random_dense)):
+        g = rng.normal(0, 0.01, (5, d.points.shape[0]))
+        sd_d, sd_c = rng.uniform(0.0, 0.1, 5), rng.uniform(0.0, 0.05, 5)
+        wb, sb = b.weights(g, sd_d, sd_c)
+        wd, sd = d.weights(g, sd_d, sd_c)
+        np.testing.assert_allclose(wb, wd, rtol=1e-9, atol=1e-10 * np.abs(wd).max())
+        np.testing.assert_allclose(sb, sd, rtol=1e-9, atol=1e-10 * np.abs(sd).max())

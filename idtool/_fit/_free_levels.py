@@ -88,8 +88,9 @@ class FreeLevels:
 
     def fr_covariance(self) -> np.ndarray:
         """The covariance of the log FR rows (the measured traces'), dense (n_FR, n_FR):
-        what the predictions' conditioning on them takes
-        (:class:`~idtool._fit._discrepancy.Conditioning` diagonalises it once)."""
+        what the predictions' conditioning takes from a fit folder written before the
+        blocks (:class:`~idtool._fit._discrepancy.Conditioning` diagonalises it once; on
+        the blocks it takes their diagonal and low rank), and the tests' reference."""
         if self.cov_y is not None:
             m = self.off_n.size
             return self.cov_y[m:, m:]

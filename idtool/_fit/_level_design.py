@@ -81,7 +81,12 @@ def discrepancy_conditioning(model: BenchModel, free: FreeLevels) -> Conditionin
     ratios (:class:`~idtool._fit._discrepancy.Conditioning`)."""
     m = free.off_n.size
     x = _measured_coordinates(model, free.measured)
-    return Conditioning(x, free.y[m:], free.fr_covariance(), length_scales(model.data))
+    scales = length_scales(model.data)
+    if free.cov_y is None and free.cov_parts is not None:  # in blocks: nothing (n, n)
+        idx = np.flatnonzero(free.measured)
+        parts = free.cov_parts
+        return Conditioning(x, free.y[m:], None, scales, parts.block[idx, 1, 1], parts.low[idx, 1])
+    return Conditioning(x, free.y[m:], free.fr_covariance(), scales)
 
 
 def _measured_coordinates(model: BenchModel, measured: np.ndarray) -> np.ndarray:
