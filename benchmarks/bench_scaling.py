@@ -50,6 +50,13 @@ it the per-step cost (LM step ~ traces^1.1) and the machine's load.
   spread (profiled: levels model 0.83 -> 0.27 s, figures 3.9 -> 2.1 s, the three
   candidates' LM fits 7.6-8.4 s either way: most of the time); at 384 (not profiled)
   what differs is the levels model's (2 traces)^2 factorisations and the 384 panels.
+- 2026-11-26, load average 6-9 (other jobs), the fit's covariance of ``z`` and the free
+  levels' kept in blocks (issue 28: nothing (p, p) or (traces, traces)), two runs each
+  of main's tree (75f40ab) and the blocks, interleaved: 96 traces 13.1, 9.5 s wall, 8.8,
+  9.0 CPU s, 0.64, 0.65 GB before; 11.1, 14.2 s, 7.8, 8.9 CPU s, 0.65, 0.64 GB after.
+  384 traces 56.6, 53.5 s wall, 33.2, 32.6 CPU s, 0.96, 0.94 GB before; 30.2, 32.8 s,
+  29.2, 31.6 CPU s, 0.85, 0.83 GB after: 0.1 GB less at 384 traces, the CPU time within
+  the runs' spread.
 """
 
 from __future__ import annotations
