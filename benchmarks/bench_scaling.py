@@ -20,7 +20,7 @@ Run: ``.venv/bin/python benchmarks/bench_scaling.py [--counts 12 24 48 96 384]
 ``--e2e``: ``idtool fit`` end to end instead (command line, defaults: the laws and
 actuators compared, the levels model, the figures), each count written as a dataset and
 fitted twice, the second timed (the first fills the compilation caches for its shapes);
-wall time of the process and its peak memory.
+wall time of the process, its CPU time (user + system) and its peak memory.
 
 Measured 2026-11-25, load average 6-10 on 2 CPUs (other jobs; the timings are noisy),
 before the OFF switch of the slope actuator was rounded: fit + checks 0.9, 12.4, 19.8,
@@ -50,6 +50,13 @@ it the per-step cost (LM step ~ traces^1.1) and the machine's load.
   spread (profiled: levels model 0.83 -> 0.27 s, figures 3.9 -> 2.1 s, the three
   candidates' LM fits 7.6-8.4 s either way: most of the time); at 384 (not profiled)
   what differs is the levels model's (2 traces)^2 factorisations and the 384 panels.
+- 2026-11-26, load average 6-9 (other jobs), the fit's covariance of ``z`` and the free
+  levels' kept in blocks (issue 28: nothing (p, p) or (traces, traces)), two runs each
+  of main's tree (75f40ab) and the blocks, interleaved: 96 traces 13.1, 9.5 s wall, 8.8,
+  9.0 CPU s, 0.64, 0.65 GB before; 11.1, 14.2 s, 7.8, 8.9 CPU s, 0.65, 0.64 GB after.
+  384 traces 56.6, 53.5 s wall, 33.2, 32.6 CPU s, 0.96, 0.94 GB before; 30.2, 32.8 s,
+  29.2, 31.6 CPU s, 0.85, 0.83 GB after: 0.1 GB less at 384 traces, the CPU time within
+  the runs' spread.
 """
 
 from __future__ import annotations
@@ -108,8 +115,9 @@ import json, resource, sys
 from idtool._cli._main import console
 sys.argv = ["idtool", "fit", sys.argv[1], "--out", sys.argv[2], "--force", "-q"]
 code = console()
-print(json.dumps({"code": code,
-    "peak_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6}))
+use = resource.getrusage(resource.RUSAGE_SELF)
+print(json.dumps({"code": code, "peak_gb": use.ru_maxrss / 1e6,
+    "user_s": use.ru_utime, "sys_s": use.ru_stime}))
 """
 
 
@@ -163,7 +171,12 @@ def run_e2e(n: int, folder: Path) -> dict | None:
             return None
     assert out is not None
     row = json.loads(out.stdout.strip().splitlines()[-1])
-    return {"traces": n, "seconds": wall, "peak_gb": row["peak_gb"]}
+    return {
+        "traces": n,
+        "seconds": wall,
+        "peak_gb": row["peak_gb"],
+        "cpu_s": row["user_s"] + row["sys_s"],
+    }
 
 
 def exponent(rows: list[dict]) -> float:
@@ -220,14 +233,15 @@ def main() -> int:
 def main_e2e(counts: list[int]) -> int:
     """``--e2e``: :func:`run_e2e` per trace count, and the exponent."""
     rows = []
-    print(f"{'traces':>6}  {'idtool fit s':>12} {'GB':>5}")
+    print(f"{'traces':>6}  {'idtool fit s':>12} {'CPU s':>6} {'GB':>5}")
     with tempfile.TemporaryDirectory() as tmp:
         for n in counts:
             r = run_e2e(n, Path(tmp))
             if r is None:
                 return 1
             rows.append(r)
-            print(f"{n:>6}  {r['seconds']:>12.1f} {r['peak_gb']:>5.2f}", flush=True)
+            cells = f"{r['seconds']:>12.1f} {r['cpu_s']:>6.1f} {r['peak_gb']:>5.2f}"
+            print(f"{n:>6}  {cells}", flush=True)
     if len(rows) >= 2:
         print(f"idtool fit: time ~ traces^{exponent(rows):.2f}")
     return 0

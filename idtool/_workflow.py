@@ -29,6 +29,7 @@ from idtool._data._write import write_dataset
 from idtool._diagnostic import Diagnostic
 from idtool._errors import IdtoolError
 from idtool._fit._artefact import FitArtefact, fit_artefact, state_arrays
+from idtool._fit._cov import Covariance
 from idtool._fit._folder import FIT_STATE, RESIDUALS_PNG, TRACES_PNG, law_state_file
 from idtool._fit._result import Estimate, FitResult
 from idtool._fit._run import FitRun
@@ -105,7 +106,11 @@ class Fit:
         return self.artefact.chosen.z
 
     @property
-    def cov_z(self) -> np.ndarray:
+    def cov_z(self) -> Covariance:
+        """The covariance of ``z``, kept in the blocks of the fit's normal equations
+        (memory linear in the traces): ``.leading(k)`` is the first ``k`` parameters'
+        (k, k), ``.diagonal()`` the variances, ``.dense()`` the whole (p, p) matrix; dense
+        from a fit folder written before the blocks, with the same methods."""
         return self.artefact.chosen.cov_z
 
     @property

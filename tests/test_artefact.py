@@ -229,3 +229,48 @@ def test_the_fit_folder_is_declared_once_and_documented():
         for where in filter(None, (f.writer, f.reader)):  # each names a real function
             module, name = where.split(":")
             assert callable(getattr(importlib.import_module(module), name)), where
+
+
+def test_a_fit_folder_with_dense_covariances_reads_and_predicts_the_same(
+    fresh_and_loaded, tmp_path
+):
+    """The state files hold the covariances of ``z`` and of the free levels in blocks,
+    nothing of size (p, p) or (levels, levels) (issue 28); a folder written before the
+    blocks (``cov_z`` and ``levels_cov_y`` dense, as each law's state file held them)
+    reads to the same matrices and predicts the same."""
+    _, loaded, _, root = fresh_and_loaded
+    old = shutil.copytree(root / "fit", tmp_path / "old")
+    blocks = ("cov_z_shared", "cov_z_cross", "cov_z_block", "cov_z_load", "cov_z_core")
+    fit = idtool.load_fit(root / "fit")
+    laws = [fit.artefact.chosen] + [law for _, law in fit.artefact.alternates.values()]
+    files = sorted(old.glob("fit_state*.npz"))
+    assert len(files) == len(laws) > 1
+    for path in files:
+        with np.load(path) as npz:
+            arrays = {k: np.asarray(npz[k]) for k in npz.files}
+        p, n = arrays["z"].size, arrays["levels_y"].size
+        assert set(blocks) <= set(arrays) and "cov_z" not in arrays
+        assert "levels_cov_block" in arrays and "levels_cov_y" not in arrays
+        assert all(a.shape not in ((p, p), (n, n)) for a in arrays.values()), path.name
+        law = next(w for w in laws if np.array_equal(w.z, arrays["z"]))
+        dense = {k: a for k, a in arrays.items() if k not in blocks and "levels_cov_" not in k}
+        dense["cov_z"] = law.cov_z.dense()
+        dense["levels_cov_y"] = law.levels[0].covariance()
+        np.savez(path, **dense)
+    back = idtool.load_fit(old)
+    assert back.levels[0].cov_parts is None and back.levels[0].cov_y is not None
+    np.testing.assert_array_equal(back.cov_z.dense(), loaded.cov_z.dense())
+    np.testing.assert_array_equal(back.levels[0].covariance(), loaded.levels[0].covariance())
+    np.testing.assert_allclose(
+        back.levels[0].variances(), loaded.levels[0].variances(), rtol=1e-12, atol=0
+    )
+    same(back.draws(300, seed=2).values, loaded.draws(300, seed=2).values)
+    a = back.predict([270.0, 500.0], [0.5, 0.7], max_draws=300)
+    b = loaded.predict([270.0, 500.0], [0.5, 0.7], max_draws=300)
+    for x, y in zip(a, b, strict=True):
+        # the conditioning's FR covariance: the dense matrix's block, or the same from
+        # the blocks (one rounding of a dot product apart)
+        np.testing.assert_allclose(x.median, y.median, rtol=1e-10)
+        np.testing.assert_allclose(x.ci95, y.ci95, rtol=1e-10)
+        assert x.new_trace is not None and y.new_trace is not None
+        np.testing.assert_allclose(x.new_trace[1], y.new_trace[1], rtol=1e-10)

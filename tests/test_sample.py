@@ -160,7 +160,7 @@ def test_posterior_width_matches_the_fits_marginal_covariance(coverage_runs):
     _, fit, ar1, _ = coverage_runs[1]
     k = fit.model.n_shared
     kept = ar1.chain[ar1.diagnostics.burn :].reshape(-1, ar1.chain.shape[-1])[:, :k]
-    ratio = kept.std(axis=0) / np.sqrt(np.diag(fit.cov_z)[:k])
+    ratio = kept.std(axis=0) / np.sqrt(fit.cov_z.diagonal()[:k])
     assert np.all((ratio > 0.8) & (ratio < 1.25)), ratio
     assert np.min(conditioning_shrinkage(fit.cov_z, k)) < 0.8
 

@@ -15,7 +15,9 @@ import idtool
 from idtool._fit import _reml as reml
 from idtool._fit._discrepancy import Conditioning, correlation, discrepancy_moments
 from idtool._fit._free_levels import INFORMED_ON, _free_step, _linearise
+from idtool._fit._level_design import discrepancy_conditioning
 from idtool._fit._program import u_normal_equations
+from idtool._posterior._groups import _levels_terms, trace_rows
 from idtool._posterior._levels import (
     SD_PRIOR,
     _mean_and_cholesky,
@@ -23,6 +25,7 @@ from idtool._posterior._levels import (
     _quadratic,
     build_levels_target,
     levels_params,
+    replicate_in_blocks,
 )
 from idtool._predict._predict import Draws, with_variability
 
@@ -212,7 +215,12 @@ def test_free_levels_in_blocks_are_the_dense_solution(example_fits):
     cov_y = dy @ cov_u @ dy.T
     np.testing.assert_allclose(u, ref, rtol=1e-10, atol=1e-12)
     assert free.sigma_n == pytest.approx(math.sqrt(sigma2), rel=1e-10)
-    np.testing.assert_allclose(free.cov_y, cov_y, rtol=0, atol=1e-10 * np.abs(cov_y).max())
+    assert free.cov_y is None  # in its blocks alone (issue 28), dense on demand
+    got = free.covariance()
+    np.testing.assert_allclose(got, cov_y, rtol=0, atol=1e-10 * np.abs(cov_y).max())
+    np.testing.assert_allclose(free.variances(), np.diag(got), rtol=1e-14)
+    idx = m + np.arange(free.measured.sum())
+    np.testing.assert_allclose(free.fr_covariance(), got[np.ix_(idx, idx)], rtol=1e-14, atol=0)
     r = np.random.default_rng(1).normal(size=cov_y.shape[0])
     assert free.cov_parts is not None
     assert free.cov_parts.quad(r) == pytest.approx(r @ np.linalg.solve(cov_y, r), rel=1e-8)
@@ -228,7 +236,8 @@ def test_levels_posterior_in_blocks_is_the_dense_one(example_fits):
     names = [p.name for p in levels_params(model, free)]
     priors = dict.fromkeys(names, SD_PRIOR)
     blocks = build_levels_target(model, free, priors)
-    dense = build_levels_target(model, dataclasses.replace(free, cov_parts=None), priors)
+    unblocked = dataclasses.replace(free, cov_y=free.covariance(), cov_parts=None)
+    dense = build_levels_target(model, unblocked, priors)
     assert blocks.parts is not None and dense.parts is None
     rng = np.random.default_rng(5)
     k = model.n_physical
@@ -250,3 +259,100 @@ def test_levels_posterior_in_blocks_is_the_dense_one(example_fits):
         np.asarray(dense.log_posterior_batch(jnp.asarray(theta))),
         rtol=1e-10,
     )
+
+
+def test_levels_replicates_in_blocks_are_the_dense_gaussian(example_fits):
+    """The posterior predictive check's replicated levels drawn on ``V + Sigma(sds)`` in
+    blocks (a per-trace part and a low-rank part, issue 28) are the dense Gaussian
+    ``g + chol(C) eps``: the same mean, and the covariance the linear map from ``eps``
+    implies is ``C``; the discrepancies and each trace's leave-one-out terms (``C^-1``'s
+    diagonal blocks) are the dense ones."""
+    on, _ = example_fits
+    model, free = on.model, on.result.variability.free
+    names = [p.name for p in levels_params(model, free)]
+    priors = dict.fromkeys(names, SD_PRIOR)
+    blocks = build_levels_target(model, free, priors)
+    unblocked = dataclasses.replace(free, cov_y=free.covariance(), cov_parts=None)
+    dense = build_levels_target(model, unblocked, priors)
+    rng = np.random.default_rng(6)
+    k, walkers = model.n_physical, 3
+    z = np.asarray(on.result.z)[:k]
+    theta = np.column_stack(
+        [
+            z[i] + 0.01 * rng.normal(size=walkers) if i < k else rng.uniform(0, 2, walkers)
+            for i in range(len(names))
+        ]
+    )
+    v = {p.name: p.value(jnp.asarray(theta[:, i])) for i, p in enumerate(blocks.params)}
+    g_ref, chol = (np.asarray(a) for a in _mean_and_cholesky(v, dense))
+    c_ref = np.einsum("wij,wkj->wik", chol, chol)
+    size = blocks.noise_size
+    assert blocks.parts is not None and dense.noise_size == dense.y.size
+    m, r = model.data.n_traces, blocks.parts[1].shape[2] + blocks.parts[2].shape[2]
+    assert size == 2 * m + r  # two per trace, one per low-rank column
+
+    @jax.jit
+    def noise(e):  # y_rep - g for the same eps at every walker: linear in eps
+        g, y_rep, *_ = replicate_in_blocks(v, blocks, jnp.broadcast_to(e, (walkers, size)))
+        return y_rep - g
+
+    basis = np.asarray(jax.vmap(noise)(jnp.eye(size)))  # (size, walkers, n)
+    for w in range(walkers):
+        implied = basis[:, w].T @ basis[:, w]
+        scale = np.abs(c_ref[w]).max()
+        np.testing.assert_allclose(implied, c_ref[w], rtol=0, atol=1e-10 * scale)
+    eps = rng.standard_normal((walkers, size))
+    g, y_rep, a, prec, d_obs, d_rep = (
+        np.asarray(x) for x in replicate_in_blocks(v, blocks, jnp.asarray(eps))
+    )
+    np.testing.assert_allclose(g, g_ref, rtol=1e-12)
+    y = np.asarray(dense.y)
+    want_obs = [(y - g_ref[w]) @ np.linalg.solve(c_ref[w], y - g_ref[w]) for w in range(walkers)]
+    rep = y_rep - g
+    want_rep = [rep[w] @ np.linalg.solve(c_ref[w], rep[w]) for w in range(walkers)]
+    np.testing.assert_allclose(d_obs, want_obs, rtol=1e-9)
+    np.testing.assert_allclose(d_rep, want_rep, rtol=1e-9)
+    idx, mask = (np.asarray(x) for x in trace_rows(dense))
+    for w in range(walkers):
+        inv = np.linalg.inv(c_ref[w])
+        want_a = inv @ (y - g_ref[w])
+        np.testing.assert_allclose(
+            np.where(mask, a[w], 0.0), np.where(mask, want_a[idx], 0.0), rtol=1e-8, atol=1e-12
+        )
+        both = mask[:, :, None] & mask[:, None, :]
+        want_p = inv[idx[:, :, None], idx[:, None, :]]
+        np.testing.assert_allclose(
+            np.where(both, prec[w], 0.0), np.where(both, want_p, 0.0), rtol=1e-9, atol=0
+        )
+    ll_blocks, _ = _levels_terms(jnp.asarray(theta), blocks, jnp.asarray(eps), idx, mask)
+    eps_dense = jnp.asarray(rng.standard_normal((walkers, dense.noise_size)))
+    ll_dense, _ = _levels_terms(jnp.asarray(theta), dense, eps_dense, idx, mask)
+    np.testing.assert_allclose(np.asarray(ll_blocks), np.asarray(ll_dense), rtol=1e-9)
+
+
+def test_discrepancy_conditioning_in_blocks_is_the_dense_one(example_fits):
+    """The kriging weights with ``V`` in blocks (its diagonal and rank-``q`` part, inverted
+    by Woodbury per draw; issue 28) against ``V`` dense (diagonalised once), at draws of
+    both sds: the example's levels fit, and a random ``V`` of 12 rows with repeats."""
+    on, _ = example_fits
+    model, free = on.model, on.result.variability.free
+    blocks = discrepancy_conditioning(model, free)
+    dense = discrepancy_conditioning(
+        model, dataclasses.replace(free, cov_y=free.covariance(), cov_parts=None)
+    )
+    assert blocks.v is None and blocks.v_low is not None and dense.v is not None
+    rng = np.random.default_rng(8)
+    x = np.concatenate([dense.x, dense.x[::-1]])
+    n = x.shape[0]
+    low = 0.01 * rng.normal(size=(n, 3))
+    diag = rng.uniform(1e-6, 4e-6, n)
+    y = rng.normal(0, 0.05, n)
+    random_blocks = Conditioning(x, y, None, dense.scales, diag, low)
+    random_dense = Conditioning(x, y, np.diag(diag) + low @ low.T, dense.scales)
+    for b, d in ((blocks, dense), (random_blocks, random_dense)):
+        g = rng.normal(0, 0.01, (5, d.points.shape[0]))
+        sd_d, sd_c = rng.uniform(0.0, 0.1, 5), rng.uniform(0.0, 0.05, 5)
+        wb, sb = b.weights(g, sd_d, sd_c)
+        wd, sd = d.weights(g, sd_d, sd_c)
+        np.testing.assert_allclose(wb, wd, rtol=1e-9, atol=1e-10 * np.abs(wd).max())
+        np.testing.assert_allclose(sb, sd, rtol=1e-9, atol=1e-10 * np.abs(sd).max())

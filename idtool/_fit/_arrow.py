@@ -22,9 +22,17 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from idtool._fit._cov import ArrowCovariance, Covariance, DenseCovariance
 from idtool._model._xp import xp
 
-__all__ = ["Arrow", "ArrowInverse", "DenseNormal", "arrow_pinv", "block_index"]
+__all__ = [
+    "Arrow",
+    "ArrowInverse",
+    "DenseNormal",
+    "arrow_pinv",
+    "block_index",
+    "inverse_and_weakest",
+]
 
 
 def block_index(n_shared: int, n_groups: int, per_group: int) -> np.ndarray:
@@ -156,7 +164,7 @@ class ArrowInverse(eqx.Module):
     (NumPy, :func:`arrow_pinv`), and the spectra the fit's singularity check reads.
 
     Attributes:
-        inverse: (p, p) the inverse, in ``z``'s layout.
+        inverse: the inverse, in ``z``'s layout, in its blocks (never (p, p)).
         shared_evals, shared_evecs: eigen-decomposition of the scaled Schur complement
             of the nuisances, ``S = A - sum_i B_i D_i^+ B_i^T`` (s, s): the curvature of
             the shared parameters with the nuisances profiled out.
@@ -164,7 +172,7 @@ class ArrowInverse(eqx.Module):
         largest: the largest eigenvalue of the scaled ``A`` and ``D_i``.
     """
 
-    inverse: np.ndarray
+    inverse: ArrowCovariance
     shared_evals: np.ndarray
     shared_evecs: np.ndarray
     block_evals: np.ndarray
@@ -173,8 +181,9 @@ class ArrowInverse(eqx.Module):
 
 
 def arrow_pinv(arrow: Arrow, rcond: float = 1e-13) -> ArrowInverse:
-    """``(J^T J)^+`` from the arrowhead blocks, in O(m (s + nb)^3 + p^2 s) (the dense
-    pseudo-inverse is O(p^3): 11 s at 384 traces, p = 1544).
+    """``(J^T J)^+`` from the arrowhead blocks, in O(m (s + nb)^3) time and O(m nb s)
+    memory, kept in its blocks (:class:`~idtool._fit._cov.ArrowCovariance`; the dense
+    pseudo-inverse is O(p^3): 11 s at 384 traces, p = 1544, and 19 MB).
 
     As the fit's dense covariance did: the matrix is first scaled to a unit diagonal
     (zero columns, parameters the data do not move, keep scale 1), and eigenvalues below
@@ -183,7 +192,6 @@ def arrow_pinv(arrow: Arrow, rcond: float = 1e-13) -> ArrowInverse:
     (block elimination is exact); a zero column gets zero variance, as with ``pinv``.
     """
     a, b, d = (np.asarray(x, float) for x in (arrow.a, arrow.b, arrow.d))
-    s, (m, nb) = a.shape[0], np.asarray(arrow.gb).shape
     scale_s = np.sqrt(np.diag(a))
     scale_b = np.sqrt(np.diagonal(d, axis1=1, axis2=2))
     scale_s = np.where(scale_s > 0.0, scale_s, 1.0)
@@ -204,16 +212,18 @@ def arrow_pinv(arrow: Arrow, rcond: float = 1e-13) -> ArrowInverse:
     keep = shared_evals > floor
     inv_shared = np.where(keep, 1.0 / np.where(keep, shared_evals, 1.0), 0.0)
     schur_inv = (shared_evecs * inv_shared) @ shared_evecs.T
-    idx = block_index(s, m, nb)  # (m, nb)
-    # the inverse is blockdiag(0, D^+) + [I; -X^T] S^+ [I, -X], X = (B_i D_i^+)_i
-    left = np.zeros((s, s + m * nb))
-    left[:, :s] = np.eye(s)
-    left[:, idx] = -np.transpose(x, (1, 0, 2))
-    inverse = left.T @ schur_inv @ left
-    inverse[idx[:, :, None], idx[:, None, :]] += d_inv
-    scale = np.concatenate([scale_s, scale_b.T.ravel()])
+    # the inverse is blockdiag(0, D^+) + [I; -X^T] S^+ [I, -X], X = (B_i D_i^+)_i, kept in
+    # those blocks (idtool._fit._cov), each scaled back
+    core = schur_inv / np.outer(scale_s, scale_s)
+    load = -np.transpose(x, (0, 2, 1)) * scale_s[None, None, :] / scale_b[:, :, None]
     return ArrowInverse(
-        inverse=inverse / np.outer(scale, scale),
+        inverse=ArrowCovariance(
+            shared=core,
+            cross=np.einsum("mbs,st->mbt", load, core),
+            block=d_inv / (scale_b[:, :, None] * scale_b[:, None, :]),
+            load=load,
+            core=core,
+        ),
         shared_evals=shared_evals,
         shared_evecs=shared_evecs,
         block_evals=block_evals,
@@ -223,17 +233,19 @@ def arrow_pinv(arrow: Arrow, rcond: float = 1e-13) -> ArrowInverse:
 
 
 def inverse_and_weakest(
-    normal: Arrow | DenseNormal, rcond: float = 1e-13
-) -> tuple[np.ndarray, float, np.ndarray]:
-    """``(J^T J)^+`` (p, p) (scaled to a unit diagonal, eigenvalues below ``rcond``
-    times the largest dropped: :func:`arrow_pinv`); the ratio of the smallest
+    normal: Arrow | DenseNormal, n_shared: int, rcond: float = 1e-13
+) -> tuple[Covariance, float, np.ndarray]:
+    """``(J^T J)^+`` (scaled to a unit diagonal, eigenvalues below ``rcond`` times the
+    largest dropped: :func:`arrow_pinv`), in blocks on the arrowhead, dense
+    (:class:`~idtool._fit._cov.DenseCovariance`, ``n_shared`` shared parameters first)
+    on the dense reference; the ratio of the smallest
     eigenvalue of the scaled matrix to its largest, and that eigenvector (p,) (in
     ``z``'s layout), for the fit's near-singularity warning.
 
     On the arrowhead the smallest eigenvalue is taken over the Schur complement (the
     shared parameters, nuisances profiled out) and the traces' blocks, the largest over
     ``A`` and the blocks: the same near-singular directions as the whole matrix's, at
-    O(p^2) instead of O(p^3). The dense reference decomposes the whole matrix."""
+    O(m) instead of O(p^3). The dense reference decomposes the whole matrix."""
     if isinstance(normal, DenseNormal):
         jtj = np.asarray(normal.jtj)
         scale = np.sqrt(np.diag(jtj))
@@ -241,7 +253,8 @@ def inverse_and_weakest(
         scaled = jtj / np.outer(scale, scale)
         evals, evecs = np.linalg.eigh(scaled)
         inverse = np.linalg.pinv(scaled, rcond=rcond, hermitian=True) / np.outer(scale, scale)
-        return inverse, float(evals[0] / evals[-1]), evecs[:, 0]
+        dense = DenseCovariance(inverse, n_shared)
+        return dense, float(evals[0] / evals[-1]), evecs[:, 0]
     inv = arrow_pinv(normal, rcond)
     s = inv.shared_evals.size
     m, nb = inv.block_evals.shape

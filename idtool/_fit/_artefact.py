@@ -30,6 +30,7 @@ from idtool._data._blocks import FitData
 from idtool._data._dataset import Dataset
 from idtool._diagnostic import Diagnostic, from_records
 from idtool._errors import IdtoolError
+from idtool._fit._cov import Covariance, covariance_from_state, covariance_state
 from idtool._fit._discrepancy import Conditioning
 from idtool._fit._folder import FIT_STATE
 from idtool._fit._free_levels import FreeLevels
@@ -56,14 +57,15 @@ Levels = tuple[FreeLevels, dict[str, tuple[float, float, float]]]
 @dataclasses.dataclass(frozen=True)
 class LawFit:
     """One coupling law's fit, what predictions and the sampler need of it: its model,
-    optimum ``z`` (internal scale, all parameters), covariance ``cov_z``, noise
+    optimum ``z`` (internal scale, all parameters), covariance ``cov_z`` (in blocks, or
+    dense from a folder written before them: :mod:`idtool._fit._cov`), noise
     parameters ``phi`` and ``sigma_n`` [N], and the levels model's sd grids (name ->
     (sd values, posterior probabilities)) and state (free levels, sds), or none."""
 
     spec: ModelSpec
     model: BenchModel = dataclasses.field(repr=False)
     z: np.ndarray
-    cov_z: np.ndarray = dataclasses.field(repr=False)
+    cov_z: Covariance = dataclasses.field(repr=False)
     phi: float
     sigma_n: float
     sd_grids: SdGrids = dataclasses.field(default_factory=dict, repr=False)
@@ -135,13 +137,14 @@ class FitArtefact:
 
 def state_arrays(result: FitResult) -> dict[str, np.ndarray]:
     """A fit's internal state as ``fit_state*.npz`` holds it: the vector ``z`` and its
-    covariance, ``phi``, ``sigma_n`` [N], the parameter names, the multi-start's optima
-    (``optima_rss`` [N^2], ``optima_z``: their physical blocks, internal scale) and the
-    levels model's sd grids and state."""
+    covariance (in blocks, :func:`~idtool._fit._cov.covariance_state`), ``phi``,
+    ``sigma_n`` [N], the parameter names, the multi-start's optima (``optima_rss``
+    [N^2], ``optima_z``: their physical blocks, internal scale) and the levels model's
+    sd grids and state."""
     k = result.model.n_physical
     arrays: dict[str, np.ndarray] = {
         "z": np.asarray(result.z),
-        "cov_z": np.asarray(result.cov_z),
+        **covariance_state(result.cov_z),  # its blocks (since issue 28: never (p, p))
         "phi": np.array(result.phi),
         "sigma_n": np.array(result.sigma_n),
         "names": np.array(result.model.names),
@@ -160,10 +163,11 @@ def state_arrays(result: FitResult) -> dict[str, np.ndarray]:
             "levels_on_n": free.on_n,
             "levels_measured": free.measured,
             "levels_y": free.y,
-            "levels_cov_y": free.cov_y,
             "levels_sigma_n": np.array(free.sigma_n),
         }
-        if free.cov_parts is not None:  # cov_y in blocks: the sampler's likelihood
+        if free.cov_y is not None:  # dense: a folder written before the blocks, resaved
+            arrays["levels_cov_y"] = free.cov_y
+        if free.cov_parts is not None:  # y's covariance in blocks (never (n, n))
             arrays |= {
                 "levels_cov_block": free.cov_parts.block,
                 "levels_cov_low": free.cov_parts.low,
@@ -194,7 +198,7 @@ def _law_fit(spec: ModelSpec, data: FitData, state: Mapping[str, np.ndarray], wh
             on_n=np.asarray(state["levels_on_n"]),
             measured=np.asarray(state["levels_measured"]).astype(bool),
             y=np.asarray(state["levels_y"]),
-            cov_y=np.asarray(state["levels_cov_y"]),
+            cov_y=np.asarray(state["levels_cov_y"]) if "levels_cov_y" in state else None,
             sigma_n=float(state["levels_sigma_n"]),
             cov_parts=_cov_parts(state),
         )
@@ -208,7 +212,7 @@ def _law_fit(spec: ModelSpec, data: FitData, state: Mapping[str, np.ndarray], wh
         spec=spec,
         model=model,
         z=np.asarray(state["z"]),
-        cov_z=np.asarray(state["cov_z"]),
+        cov_z=covariance_from_state(state, model.n_shared),
         phi=float(state["phi"]),
         sigma_n=float(state["sigma_n"]),
         sd_grids={

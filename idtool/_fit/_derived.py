@@ -1,6 +1,6 @@
 """Quantities derived from a fit's parameters (the sdof law's drive force Fe_max), with
 their standard errors and 95% intervals by the delta method on the log scale (each is
-positive), from the fit's final covariance."""
+positive), from the fit's final covariance (a quadratic form on its blocks)."""
 
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ def derived_estimates(r: FitResult) -> dict[str, tuple[Estimate, str]]:
             return jnp.log(model.coupling_of(model.values(zz)).derived(a_max)[name][0])
 
         grad = np.asarray(jax.grad(log_value)(z))
-        se_log = math.sqrt(max(float(grad @ np.asarray(r.cov_z) @ grad), 0.0))
+        se_log = math.sqrt(max(r.cov_z.quad(grad), 0.0))
         v = float(value)
         ci = (v * math.exp(-Z95 * se_log), v * math.exp(Z95 * se_log))
         out[name] = (Estimate(name, unit, v, v * se_log, ci), what)

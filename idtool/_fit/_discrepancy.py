@@ -119,22 +119,28 @@ def psd_root(a: np.ndarray) -> np.ndarray:
 class Conditioning:
     """What conditioning the discrepancy on the data needs: the measured friction
     ratios' coordinates ``x`` (n, 3), their free estimates ``y`` (log FR, n) and noise
-    covariance ``v`` (n, n), and the length scales.
+    covariance ``V``, and the length scales. ``V`` is either ``v`` (n, n), dense (a fit
+    folder written before the blocks), or, with ``v`` None, ``diag(v_diag) + v_low
+    v_low^T`` (``v_low`` (n, q): the shared parameters' rank; memory linear in the
+    traces).
 
     The discrepancy is a function of the operating point, so the rows enter the
     predictions only through the ``p`` distinct points they were measured at
     (:attr:`points`): with ``P`` (n, p) which point each row is at, the kriging moments
     need ``P^T S^-1 (y - g)`` and ``P^T S^-1 P`` (module docstring), per draw (p,) and
     (p, p) whatever the traces (issue 28: (draws, n, n) was 1 GB at 384 traces and
-    2000 draws). ``S = A + s_d^2 P K P^T`` with ``A = V + s_c^2 I``: ``V``'s
-    eigenvectors (once) give ``A^-1`` at every scatter sd, and Woodbury's identity
-    adds the discrepancy's rank ``p``.
+    2000 draws). ``S = A + s_d^2 P K P^T`` with ``A = V + s_c^2 I``: a dense ``V``'s
+    eigenvectors (once) give ``A^-1`` at every scatter sd; ``V`` in blocks gives it by
+    Woodbury's identity over its rank ``q``, per draw; Woodbury's identity then adds the
+    discrepancy's rank ``p``.
     """
 
     x: np.ndarray
     y: np.ndarray
-    v: np.ndarray
+    v: np.ndarray | None
     scales: np.ndarray
+    v_diag: np.ndarray | None = None
+    v_low: np.ndarray | None = None
 
     @functools.cached_property
     def _layout(self) -> tuple[np.ndarray, np.ndarray]:
@@ -158,6 +164,7 @@ class Conditioning:
         """``V``'s eigenvalues (n,) and eigenvectors (n, n), ``P^T Q`` (p, n) and a root
         ``R`` (p, p) of the points' correlation ``K``."""
         points, where = self._layout
+        assert self.v is not None  # the dense path
         lam, q = np.linalg.eigh(self.v)
         pq = np.zeros((points.shape[0], q.shape[1]))
         np.add.at(pq, where, q)
@@ -171,12 +178,16 @@ class Conditioning:
         from the model's log FR at the :attr:`points` (draws, p) and the draws' sds
         (draws,): the arguments ``weights`` and ``s_inv`` of
         :func:`discrepancy_moments` with ``x_rows`` the :attr:`points`."""
-        lam, q, pq, root = self._eigen
         where = self._layout[1]
-        inv = 1.0 / (lam[None, :] + (np.asarray(sd_scatter) ** 2)[:, None])  # (d, n)
         res = self.y[None] - np.asarray(log_fr_model)[:, where]  # (d, n)
-        g = np.einsum("pn,dn,qn->dpq", pq, inv, pq)  # P^T A^-1 P
-        h = np.einsum("pn,dn->dp", pq, inv * (res @ q))  # P^T A^-1 (y - g)
+        if self.v is None:
+            g, h = self._in_blocks(res, np.asarray(sd_scatter))
+            root = self._root
+        else:
+            lam, q, pq, root = self._eigen
+            inv = 1.0 / (lam[None, :] + (np.asarray(sd_scatter) ** 2)[:, None])  # (d, n)
+            g = np.einsum("pn,dn,qn->dpq", pq, inv, pq)  # P^T A^-1 P
+            h = np.einsum("pn,dn->dp", pq, inv * (res @ q))  # P^T A^-1 (y - g)
         s2 = (np.asarray(sd_disc) ** 2)[:, None, None]
         gr = g @ root  # (d, p, p)
         inner = np.eye(root.shape[1])[None] + s2 * (root.T[None] @ gr)
@@ -184,3 +195,31 @@ class Conditioning:
         rh = np.einsum("pr,dp->dr", root, h)[:, :, None]
         weights = h - (s2 * gr @ np.linalg.solve(inner, rh))[:, :, 0]
         return weights, s_inv
+
+    @functools.cached_property
+    def _root(self) -> np.ndarray:
+        """A root ``R`` (p, p) of the points' correlation ``K``."""
+        points = self.points
+        return psd_root(np.asarray(correlation(points, points, self.scales)))
+
+    def _in_blocks(self, res: np.ndarray, sd_scatter: np.ndarray) -> tuple[np.ndarray, ...]:
+        """``P^T A^-1 P`` (d, p, p) and ``P^T A^-1 res`` (d, p) per draw with ``A =
+        diag(v_diag + s_c^2) + U U^T`` (``U = v_low``): ``A^-1 = E - E U (I + U^T E
+        U)^-1 U^T E``, ``E`` the diagonal's inverse; O(n q^2) per draw, nothing (n, n)."""
+        assert self.v_diag is not None and self.v_low is not None
+        u = self.v_low
+        n, q = u.shape
+        where = self._layout[1]
+        p = self.points.shape[0]
+        e = 1.0 / (self.v_diag[None, :] + (sd_scatter**2)[:, None])  # (d, n)
+        onehot = np.zeros((n, p))
+        onehot[np.arange(n), where] = 1.0
+        pu = np.stack([e[:, where == j] @ u[where == j] for j in range(p)], axis=1)  # P^T E U
+        utu = (e @ (u[:, :, None] * u[:, None, :]).reshape(n, q * q)).reshape(-1, q, q)
+        er = e * res
+        inner = np.eye(q)[None] + utu
+        rhs = np.concatenate([pu.transpose(0, 2, 1), (er @ u)[:, :, None]], axis=2)
+        sol = np.linalg.solve(inner, rhs)  # (d, q, p + 1)
+        g = np.einsum("dp,pq->dpq", e @ onehot, np.eye(p)) - pu @ sol[:, :, :p]
+        h = er @ onehot - (pu @ sol[:, :, p:])[:, :, 0]
+        return g, h

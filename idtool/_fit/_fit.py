@@ -305,24 +305,27 @@ def _summarise(
     n, p = w.size, z.size
     rss = float(w @ w)
     sigma2 = rss / (n - p)
-    # (J^T J)^+ from the arrowhead blocks (O(p^2), not O(p^3)). A parameter the data do
-    # not move at all (saturated at a bound) has a zero column and zero variance; the
-    # bound warning below names it.
+    # (J^T J)^+ from the arrowhead blocks, kept in them (O(m) time and memory, never
+    # (p, p): idtool._fit._cov). A parameter the data do not move at all (saturated at a
+    # bound) has a zero column and zero variance; the bound warning below names it.
     normal = jax.tree.map(np.asarray, best.normal)  # NumPy: no one-operation programs
-    inverse, weakest, weakest_direction = inverse_and_weakest(normal)
+    inverse, weakest, weakest_direction = inverse_and_weakest(normal, model.n_shared)
     jtr = np.asarray(normal.grad)
-    decrement = float(jtr @ inverse @ jtr)
+    decrement = inverse.quad(jtr)
     converged = bool(best.converged) or decrement < _DECREMENT_AT_OPTIMUM * rss / n
-    cov = sigma2 * inverse
-    se_z = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    se_safe = np.where(se_z > 0.0, se_z, 1.0)
-    corr = cov / np.outer(se_safe, se_safe)
+    cov = inverse.scaled(sigma2)
+    variances = cov.diagonal()
+    se_z = np.sqrt(np.maximum(variances, 0.0))
+    se_safe = np.where(se_z > 0.0, se_z, 1.0)[: model.n_shared]
+    # the shared parameters' correlations (all the reports show; the nuisances' would be
+    # (p, p))
+    corr = cov.leading(model.n_shared) / np.outer(se_safe, se_safe)
 
     # delta method for the physical values (and the per-trace friction ratios)
     vals, slopes, dratio = _values_and_jacobian(model, z, *(np.asarray(x) for x in best.aux[:2]))
     k = model.n_physical
-    var_ratio = np.einsum("ij,jk,ik->i", dratio, cov[:k, :k], dratio)
-    se_vals = np.sqrt(np.maximum(np.concatenate([slopes**2 * np.diag(cov), var_ratio]), 0.0))
+    var_ratio = np.einsum("ij,jk,ik->i", dratio, cov.leading(k), dratio)
+    se_vals = np.sqrt(np.maximum(np.concatenate([slopes**2 * variances, var_ratio]), 0.0))
 
     warnings: list[str] = []
     estimates: dict[str, Estimate] = {}

@@ -27,7 +27,7 @@ import numpy as np
 
 from idtool._fit._compiled import program
 from idtool._fit._discrepancy import psd_root
-from idtool._fit._level_cov import LevelCovariance
+from idtool._fit._level_cov import LevelCovariance, from_pairs
 from idtool._fit._program import run_lm
 from idtool._model._benchmodel import BenchModel
 
@@ -54,18 +54,50 @@ class FreeLevels:
     """Every trace's OFF and ON level fitted freely (module docstring).
 
     ``y`` holds log OFF for every trace, then log FR for the traces in ``measured``;
-    ``cov_y`` its covariance (AR(1) noise, nuisances and shared slopes integrated).
+    its covariance (AR(1) noise, nuisances and shared slopes integrated) is
+    ``cov_parts``, in per-trace blocks and a low rank (memory linear in the traces), or
+    ``cov_y``, dense (n, n), read from a fit folder written before the blocks: one of
+    the two is set. :meth:`covariance` gives the dense matrix either way.
     """
 
     off_n: np.ndarray
     on_n: np.ndarray
     measured: np.ndarray  # (traces,) the ON level is reached and measured
     y: np.ndarray
-    cov_y: np.ndarray
+    cov_y: np.ndarray | None
     sigma_n: float
-    # cov_y in per-trace blocks and a low rank (disc empty): a fresh fit's, None when
-    # read from a saved fit
+    # the covariance in per-trace blocks and a low rank (disc empty)
     cov_parts: LevelCovariance | None = None
+
+    def covariance(self) -> np.ndarray:
+        """``y``'s covariance as a dense (n, n) matrix: for the dense reference paths
+        (a fit folder without the blocks) and the tests (O(n^2) memory)."""
+        if self.cov_y is not None:
+            return self.cov_y
+        assert self.cov_parts is not None
+        return self.cov_parts.dense(np.zeros(3))
+
+    def variances(self) -> np.ndarray:
+        """The variances of ``y`` (n,), from the blocks where there are (no (n, n))."""
+        if self.cov_y is not None:
+            return np.diag(self.cov_y)
+        assert self.cov_parts is not None
+        p = self.cov_parts
+        pairs = np.diagonal(p.block, 0, 1, 2) + np.sum(p.low**2, axis=2)
+        return from_pairs(pairs, self.measured)
+
+    def fr_covariance(self) -> np.ndarray:
+        """The covariance of the log FR rows (the measured traces'), dense (n_FR, n_FR):
+        what the predictions' conditioning takes from a fit folder written before the
+        blocks (:class:`~idtool._fit._discrepancy.Conditioning` diagonalises it once; on
+        the blocks it takes their diagonal and low rank), and the tests' reference."""
+        if self.cov_y is not None:
+            m = self.off_n.size
+            return self.cov_y[m:, m:]
+        assert self.cov_parts is not None
+        idx = np.flatnonzero(self.measured)
+        low = self.cov_parts.low[idx, 1]
+        return np.diag(self.cov_parts.block[idx, 1, 1]) + low @ low.T
 
     @property
     def friction_ratio(self) -> np.ndarray:
@@ -77,7 +109,7 @@ class FreeLevels:
         m = self.off_n.size
         se = np.full(m, np.nan)
         k = np.flatnonzero(self.measured)
-        se_log = np.sqrt(np.diag(self.cov_y)[m:])
+        se_log = np.sqrt(self.variances()[m:])
         se[k] = self.friction_ratio[k] * se_log
         return se
 
@@ -209,7 +241,7 @@ def _free_step(model: BenchModel, z: np.ndarray, phi: float) -> tuple[FreeLevels
         on_n=on,
         measured=measured,
         y=y,
-        cov_y=parts.dense(np.zeros(3)),
+        cov_y=None,  # in its blocks, parts: never (n, n)
         sigma_n=math.sqrt(sigma2),
         cov_parts=parts,
     ), u

@@ -71,9 +71,9 @@ def profile_start(result: FitResult, i: int, zi: float, z_from=None) -> np.ndarr
     of across the valley: 70-90 LM steps per refit on 48 traces before, most of them
     crawling back along it."""
     z = np.array(result.z if z_from is None else z_from, float)
-    cov = np.asarray(result.cov_z)
-    if cov[i, i] > 0.0:
-        z += cov[:, i] / cov[i, i] * (zi - z[i])
+    column = result.cov_z.column(i)  # (p,): the rest of the matrix is not needed
+    if column[i] > 0.0:
+        z += column / column[i] * (zi - z[i])
     z[i] = zi
     return z
 
@@ -116,7 +116,7 @@ def check_intervals(result: FitResult) -> FitResult:
     for name in model.physical_names:
         i = model.names.index(name)
         spec = model.params[i]
-        se = float(np.sqrt(result.cov_z[i, i]))
+        se = float(np.sqrt(result.cov_z.diagonal()[i]))
         if not spec.bounded or not se > 0.0:
             continue
         est = estimates[name]
@@ -190,7 +190,7 @@ def profile_parameter(result: FitResult, name: str, n_points: int = 9) -> Profil
     """
     model = result.model
     i = model.names.index(name)
-    se = float(np.sqrt(result.cov_z[i, i]))
+    se = float(np.sqrt(result.cov_z.diagonal()[i]))
     grid = result.z[i] + se * np.linspace(-3.0, 3.0, n_points)
     delta = np.empty(n_points)
     mid = n_points // 2

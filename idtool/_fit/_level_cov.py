@@ -38,8 +38,10 @@ from idtool._model._xp import xp
 __all__ = [
     "LevelCovariance",
     "discrepancy_root",
+    "draw",
     "factor",
     "from_pairs",
+    "precision_blocks",
     "solve",
     "to_pairs",
 ]
@@ -161,3 +163,32 @@ def solve(f, rhs):
     t = x.einsum("mir,mic->rc", w, y)
     t = x.linalg.solve(chol.T, x.linalg.solve(chol, t))
     return y - x.einsum("mir,rc->mic", bw, t)
+
+
+def precision_blocks(f):
+    """The per-trace (2, 2) diagonal blocks of ``C^-1`` (m, 2, 2), from :func:`factor`'s
+    ``f``: ``B_i^-1 - (B^-1 W)_i (I + W^T B^-1 W)^-1 (B^-1 W)_i^T`` (Woodbury), what a
+    trace's leave-one-out density needs, without the (n, n) inverse."""
+    binv, bw, chol, _, _ = f
+    x = xp(binv, bw)
+    m, _, r = bw.shape
+    u = x.linalg.solve(chol, bw.reshape(2 * m, r).T).reshape(r, m, 2)
+    return binv - x.einsum("rmi,rmj->mij", u, u)
+
+
+def draw(tau2, block, low, disc, measured, eps):
+    """A draw of ``N(0, C)`` at the variances ``tau2`` (3,), in pairs (m, 2), from
+    standard normals ``eps`` (2 m + r,) (``r`` the columns of ``W``): the first 2 m
+    through each trace's ``chol(B_i)``, the last r through ``W``. Its covariance is
+    ``B + W W^T = C``: the same Gaussian as ``chol(C) eps`` on the dense matrix, in
+    O(m r) instead of O(m^3). Linear in ``eps``; unmeasured FR entries are to be dropped
+    (:func:`from_pairs`)."""
+    x = xp(tau2, block, low, disc, eps)
+    b = block + _scatter(tau2, measured, x)
+    m = b.shape[0]
+    own = eps[: 2 * m].reshape(m, 2)
+    l00 = x.sqrt(b[:, 0, 0])
+    l10 = b[:, 1, 0] / l00
+    l11 = x.sqrt(b[:, 1, 1] - l10**2)
+    lower = x.stack([l00 * own[:, 0], l10 * own[:, 0] + l11 * own[:, 1]], axis=1)
+    return lower + x.einsum("mir,r->mi", _columns(tau2, low, disc, x), eps[2 * m :])

@@ -26,24 +26,36 @@ class LevelDesign:
     """Layout of the levels model's data ``y`` (module docstring).
 
     ``rows``: which of (log OFF per trace, log FR per trace) ``y`` holds; ``kinds``
-    (n, 2) one-hot OFF / FR rows; ``disc_corr`` (n, n) the discrepancy's correlation
-    between the FR rows (1 where they share an operating point; 0 in the OFF rows);
-    ``disc_root`` (traces, 2, p) the same as a root in pairs,
-    ``disc_corr = from_pairs(D) from_pairs(D)^T`` (:mod:`idtool._fit._level_cov`);
-    ``active`` which of :data:`SD_PARAMS` the data can inform (``scatter_fr`` only with
-    repeated operating points).
+    (n, 2) one-hot OFF / FR rows; ``disc_root`` (traces, 2, p) a root in pairs of the
+    discrepancy's correlation between the rows (:meth:`disc_corr`, ``from_pairs(D)
+    from_pairs(D)^T``, :mod:`idtool._fit._level_cov`); ``active`` which of
+    :data:`SD_PARAMS` the data can inform (``scatter_fr`` only with repeated operating
+    points); ``coords`` (n_FR, 3) and ``scales`` the FR rows' operating-point
+    coordinates and the correlation's length scales.
     """
 
     rows: np.ndarray
     kinds: np.ndarray
-    disc_corr: np.ndarray
     op: np.ndarray
     active: np.ndarray
     disc_root: np.ndarray
+    coords: np.ndarray
+    scales: np.ndarray
 
     @property
     def separable(self) -> bool:
         return bool(self.active[1])
+
+    def disc_corr(self) -> np.ndarray:
+        """The discrepancy's correlation between the rows of ``y``, dense (n, n): 1
+        where two FR rows share an operating point, 0 in the OFF rows. Only for the
+        dense path (a fit folder written before the blocks); the blocks' is
+        :attr:`disc_root`."""
+        n = self.rows.size
+        m = n - self.coords.shape[0]
+        out = np.zeros((n, n))
+        out[m:, m:] = np.asarray(correlation(self.coords, self.coords, self.scales))
+        return out
 
 
 def level_design(model: BenchModel, measured: np.ndarray) -> LevelDesign:
@@ -56,13 +68,12 @@ def level_design(model: BenchModel, measured: np.ndarray) -> LevelDesign:
     kinds[m:, 1] = 1.0
     op = np.asarray(model.data.op_index)[idx]
     x = _measured_coordinates(model, measured)
-    disc_corr = np.zeros((n, n))
-    disc_corr[m:, m:] = np.asarray(correlation(x, x, length_scales(model.data)))
+    scales = np.asarray(length_scales(model.data))
     repeated = bool(op.size and np.any(np.bincount(op) >= 2))
     active = np.array([True, repeated, op.size > 0])
-    root = discrepancy_root(x, measured, length_scales(model.data))
+    root = discrepancy_root(x, measured, scales)
     rows = np.concatenate([np.arange(m), m + idx])
-    return LevelDesign(rows, kinds, disc_corr, op, active, root)
+    return LevelDesign(rows, kinds, op, active, root, x, scales)
 
 
 def discrepancy_conditioning(model: BenchModel, free: FreeLevels) -> Conditioning:
@@ -70,7 +81,12 @@ def discrepancy_conditioning(model: BenchModel, free: FreeLevels) -> Conditionin
     ratios (:class:`~idtool._fit._discrepancy.Conditioning`)."""
     m = free.off_n.size
     x = _measured_coordinates(model, free.measured)
-    return Conditioning(x, free.y[m:], free.cov_y[m:, m:], length_scales(model.data))
+    scales = length_scales(model.data)
+    if free.cov_y is None and free.cov_parts is not None:  # in blocks: nothing (n, n)
+        idx = np.flatnonzero(free.measured)
+        parts = free.cov_parts
+        return Conditioning(x, free.y[m:], None, scales, parts.block[idx, 1, 1], parts.low[idx, 1])
+    return Conditioning(x, free.y[m:], free.fr_covariance(), scales)
 
 
 def _measured_coordinates(model: BenchModel, measured: np.ndarray) -> np.ndarray:

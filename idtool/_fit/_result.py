@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from idtool._fit._cov import Covariance
 from idtool._fit._level_design import discrepancy_conditioning
 from idtool._fit._variability import Variability
 from idtool._model._benchmodel import BenchModel
@@ -108,13 +109,15 @@ class FitResult:
 
     model: BenchModel
     z: np.ndarray
-    cov_z: np.ndarray
+    # the covariance of z, in the arrowhead's blocks (idtool._fit._cov; (p, p) only
+    # for the dense reference path)
+    cov_z: Covariance
     phi: float
     sigma_n: float
     rss: float
     loglik: float
     estimates: dict[str, Estimate]
-    correlation: np.ndarray
+    correlation: np.ndarray  # the shared parameters' (s, s), in z's order
     friction_ratio: np.ndarray
     friction_ratio_se: np.ndarray
     optima: list[dict]

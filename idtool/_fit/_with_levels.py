@@ -55,10 +55,7 @@ def with_variability(result: FitResult) -> FitResult:
         )
     z = result.z.copy()
     z[:k] = v.theta
-    cov = result.cov_z.copy()
-    cov[:k, :] = 0.0
-    cov[:, :k] = 0.0
-    cov[:k, :k] = v.cov_theta
+    cov = result.cov_z.with_leading(k, v.cov_theta)
     se_z = np.sqrt(np.diag(v.cov_theta))
     estimates = dict(result.estimates)
     for i, spec in enumerate(model.shared_params[:k]):

@@ -13,7 +13,10 @@ The unit of observation is the trace (a pull): ``az.loo`` leaves one trace out.
   with ``P = C^-1`` and ``a = P (y - g)``, ``y_T | y_-T ~ N(y_T - P_TT^-1 a_T,
   P_TT^-1)``, so ``log p = -k/2 log 2 pi + 1/2 log det P_TT - 1/2 a_T^T P_TT^-1 a_T``.
   ``az.loo`` given these terms computes exactly the importance-sampled LOO of that
-  paper. ``posterior_predictive``: replicated ``y`` at each draw, ``g + chol(C) eps``.
+  paper. ``posterior_predictive``: replicated ``y`` at each draw, ``g + C^(1/2) eps``
+  (on ``C``'s per-trace blocks and low rank where the fit saved them, as ``P_TT`` and
+  ``a``: :func:`~idtool._posterior._levels.replicate_in_blocks`; else the dense
+  factor).
 * Noise-only models: given the shared parameters the traces are independent (nuisances
   and AR(1) noise are per trace), so each trace's marginal log-likelihood is the exact
   factorisation (:func:`~idtool._posterior._likelihood.trace_logliks_batch`).
@@ -35,7 +38,12 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.linalg import cho_solve
 
-from idtool._posterior._levels import LevelsTarget, _mean_and_cholesky, build_levels_target
+from idtool._posterior._levels import (
+    LevelsTarget,
+    _mean_and_cholesky,
+    build_levels_target,
+    replicate_in_blocks,
+)
 from idtool._posterior._likelihood import (
     Target,
     build_target,
@@ -49,7 +57,7 @@ __all__ = ["MAX_DRAWS", "levels_groups", "model_check_groups", "noise_groups", "
 
 MAX_DRAWS = 4000  # as many as Stan keeps by default; PSIS-LOO needs a few thousand
 PREDICTIVE_DRAWS = 200  # noise-only posterior predictive: block means of 200 draws
-_CHUNK = 1000  # draws per compiled call (memory: draws x levels^2)
+_CHUNK = 1000  # draws per compiled call (memory: draws x levels^2 on the dense path)
 
 
 def thinned_steps(kept_steps: int, walkers: int, max_draws: int = MAX_DRAWS) -> np.ndarray:
@@ -75,20 +83,25 @@ def _levels_terms(theta, target: LevelsTarget, eps, idx, mask):
     """Per draw: each trace's leave-one-out log density (module docstring) and a
     replicated ``y``; ``idx``, ``mask``: :func:`trace_rows`."""
     v = {p.name: p.value(theta[:, i]) for i, p in enumerate(target.params)}
-    g, chol = _mean_and_cholesky(v, target)
-    n = target.y.size
-    prec = jax.vmap(lambda c: cho_solve((c, True), jnp.eye(n)))(chol)
-    a = jnp.einsum("wij,wj->wi", prec, target.y[None] - g)
-    p_tt = prec[:, idx[:, :, None], idx[:, None, :]]  # (draws, traces, 2, 2)
+    if target.parts is not None:  # C in blocks: its inverse's diagonal blocks, O(traces)
+        _, y_rep, a_pairs, p_tt, _, _ = replicate_in_blocks(v, target, eps)
+        a_t = jnp.where(mask, a_pairs, 0.0)
+    else:  # a fit saved without the blocks: the dense (n, n) inverse per draw
+        g, chol = _mean_and_cholesky(v, target)
+        n = target.y.size
+        prec = jax.vmap(lambda c: cho_solve((c, True), jnp.eye(n)))(chol)
+        a = jnp.einsum("wij,wj->wi", prec, target.y[None] - g)
+        p_tt = prec[:, idx[:, :, None], idx[:, None, :]]  # (draws, traces, 2, 2)
+        a_t = jnp.where(mask, a[:, idx], 0.0)
+        y_rep = g + jnp.einsum("wij,wj->wi", chol, eps)
     both = mask[:, :, None] & mask[:, None, :]
     p_tt = jnp.where(both, p_tt, jnp.eye(2))  # a missing FR row: an inert unit block
-    a_t = jnp.where(mask, a[:, idx], 0.0)
     chol_t = jnp.linalg.cholesky(p_tt)
     logdet = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol_t, axis1=-2, axis2=-1)), axis=-1)
     quad = jnp.einsum("wti,wti->wt", a_t, jnp.linalg.solve(p_tt, a_t[..., None])[..., 0])
     k = jnp.sum(mask, axis=1)
     ll = -0.5 * k * jnp.log(2.0 * jnp.pi) + 0.5 * logdet - 0.5 * quad
-    return ll, g + jnp.einsum("wij,wj->wi", chol, eps)
+    return ll, y_rep
 
 
 @jax.jit
@@ -132,7 +145,7 @@ def levels_groups(theta: np.ndarray, target: LevelsTarget, seed: int) -> dict:
     docstring)."""
     steps, walkers, ndim = theta.shape
     flat = theta.reshape(-1, ndim)
-    eps = np.random.default_rng([seed, 7]).standard_normal((flat.shape[0], int(target.y.size)))
+    eps = np.random.default_rng([seed, 7]).standard_normal((flat.shape[0], target.noise_size))
     idx, mask = trace_rows(target)
     ll, y_rep = _chunked(lambda t, e: _levels_terms(t, target, e, idx, mask), flat, eps)
     m = target.model.data.n_traces

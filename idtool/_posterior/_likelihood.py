@@ -30,6 +30,7 @@ import numpy as np
 from jax.scipy.linalg import solve_triangular
 from jaxtyping import Array
 
+from idtool._fit._cov import Covariance
 from idtool._model._benchmodel import BenchModel
 from idtool._model._noise import NOISE_MODELS, whiten
 from idtool._model._params import Param
@@ -280,11 +281,11 @@ def log_posterior(theta: Array, target: Target) -> Array:
     return log_posterior_batch(theta[None], target)[0]
 
 
-def conditioning_shrinkage(cov_z: np.ndarray, n_shared: int) -> np.ndarray:
+def conditioning_shrinkage(cov_z: Covariance, n_shared: int) -> np.ndarray:
     """sd of each shared parameter with the nuisances held fixed, over its marginal sd
-    (from the fit's covariance): how much fixing the nuisances would understate."""
-    s = slice(0, n_shared)
-    rest = slice(n_shared, cov_z.shape[0])
-    css, csn, cnn = cov_z[s, s], cov_z[s, rest], cov_z[rest, rest]
-    cond = css - csn @ np.linalg.solve(cnn, csn.T)
-    return np.sqrt(np.maximum(np.diag(cond), 0.0) / np.diag(css))
+    (from the fit's covariance, in its blocks): how much fixing the nuisances would
+    understate."""
+    if n_shared != cov_z.n_shared:
+        raise ValueError(f"{n_shared} shared parameters: the covariance has {cov_z.n_shared}")
+    cond = cov_z.shared_given_nuisances()
+    return np.sqrt(np.maximum(np.diag(cond), 0.0) / np.diag(cov_z.leading(n_shared)))

@@ -12,6 +12,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from idtool._errors import IdtoolError
+from idtool._fit._cov import Covariance
 from idtool._fit._discrepancy import Conditioning
 from idtool._fit._free_levels import FreeLevels
 from idtool._fit._result import weakly_identified
@@ -33,7 +34,7 @@ class FitLike(Protocol):
     @property
     def z(self) -> np.ndarray: ...
     @property
-    def cov_z(self) -> np.ndarray: ...
+    def cov_z(self) -> Covariance: ...
     @property
     def phi(self) -> float: ...
     @property

@@ -40,6 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from idtool._errors import IdtoolError
+from idtool._fit._cov import covariance_state
 from idtool._fit._folder import CHAIN_H5
 from idtool._fit._variability import SD_PARAMS
 from idtool._model._benchmodel import BenchModel
@@ -120,7 +121,9 @@ class LogPosterior:
 
 def _fingerprint(fit: FitLike) -> str:
     h = hashlib.sha256()
-    for a in (fit.z, fit.cov_z, np.array([fit.phi])):
+    # the covariance as its state file holds it: a dense one (a folder written before
+    # the blocks) hashes to what it did, so its chains resume
+    for a in (fit.z, *covariance_state(fit.cov_z).values(), np.array([fit.phi])):
         h.update(np.ascontiguousarray(a, dtype=float).tobytes())
     return h.hexdigest()
 
@@ -262,7 +265,7 @@ def sample_posterior(
         free, sds = fit.levels
         levels_target = build_levels_target(fit.model, free, table)
         k = fit.model.n_physical
-        theta, cov = levels_start(fit.z[:k], fit.cov_z[:k, :k], sds, levels_target)
+        theta, cov = levels_start(fit.z[:k], fit.cov_z.leading(k), sds, levels_target)
         z_lin = np.asarray(fit.z)
         fn = LogPosterior(levels_target, _batch(walkers, noise))
         rng = np.random.default_rng(seed)

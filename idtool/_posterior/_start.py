@@ -198,7 +198,7 @@ def find_start(fit: Any, target: Target, rebuild: Callable[[np.ndarray], Target]
     noise = zip(params[k:], noise_sd, best_theta[k:], strict=True)
     sd_z = [s / p.slope(c) for p, s, c in noise]
     cov = np.zeros((len(params), len(params)))
-    cov[:k, :k] = fit.cov_z[:k, :k]
+    cov[:k, :k] = fit.cov_z.leading(k)
     cov[k:, k:] = np.diag(np.square(sd_z))
     return Start(best_theta, cov, best_lp, z_lin, target, tuple(modes), tuple(warnings))
 

@@ -23,6 +23,7 @@ import numpy as np
 
 from idtool._data._blocks import FitData
 from idtool._diagnostic import Diagnostic
+from idtool._fit._cov import Covariance
 from idtool._fit._discrepancy import Conditioning, discrepancy_moments, operating_coordinates
 from idtool._model._benchmodel import BenchModel
 
@@ -173,7 +174,7 @@ def _conditioned(sds: dict, conditioning: Conditioning | None) -> str:
 def draws_from_covariance(
     model: BenchModel,
     z: np.ndarray,
-    cov_z: np.ndarray,
+    cov_z: Covariance,
     max_draws: int = 2000,
     seed: int = 0,
     sd_grids: SdGrids | None = None,
@@ -184,7 +185,8 @@ def draws_from_covariance(
     fit's sd grids ``sd_grids``; the discrepancy conditioned on ``conditioning``."""
     k = model.n_physical
     rng = np.random.default_rng(seed)
-    cov = 0.5 * (cov_z[:k, :k] + cov_z[:k, :k].T)
+    block = cov_z.leading(k)  # the physical parameters' block: all the draws need
+    cov = 0.5 * (block + block.T)
     s, v = np.linalg.eigh(cov)
     if s.min() < 0.0:
         # A degenerate fit (a parameter at its bound, a direction the data do not

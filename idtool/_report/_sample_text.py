@@ -181,7 +181,7 @@ def plot_levels_check(check: LevelsCheck, free, model, path: Path) -> Path:
     y, (lo, hi) = check.y, check.band
     fig, (a1, a2) = subplots(1, 2, figsize=(MAX_WIDTH_IN, 5.0))
     x_off = np.arange(m)
-    sd_off = np.sqrt(np.diag(free.cov_y)[:m])
+    sd_off = np.sqrt(free.variances()[:m])
     ref = np.median(y[:m])
     a1.fill_between(
         x_off, 100 * (lo[:m] - ref), 100 * (hi[:m] - ref), alpha=0.3, label="95% predictive"
@@ -197,7 +197,7 @@ def plot_levels_check(check: LevelsCheck, free, model, path: Path) -> Path:
     a2.errorbar(
         np.arange(idx.size),
         fr,
-        1.96 * fr * np.sqrt(np.diag(free.cov_y)[m:]),
+        1.96 * fr * np.sqrt(free.variances()[m:]),
         fmt="o",
         ms=3,
         label="trace (own FR)",
