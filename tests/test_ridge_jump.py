@@ -6,7 +6,6 @@ import emcee
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from scipy import stats
 
 from idtool._model._params import Param
 from idtool._posterior._moves import sampler_moves
@@ -151,27 +150,3 @@ def test_the_proposal_density_and_its_hastings_factor():
 
     np.testing.assert_allclose(factor[:2], log_q(coords[:2, 0]) - log_q(new[:2, 0]), rtol=1e-12)
     assert factor[2] == -np.inf  # a walker beyond the profile's ends is not moved by it
-
-
-def test_the_block_proposal_redraws_the_others_around_the_ridge_with_its_density():
-    # three coordinates, the profiled one in the middle; a spread per profile point
-    grid = np.array([-1.0, 0.0, 2.0])
-    log_post = np.array([-1.0, 0.0, -2.0])
-    spread = np.array([np.diag([0.1, 2.0]), [[0.5, 0.0], [0.3, 0.2]], np.eye(2)])
-    move = ridge_jump(1, grid, log_post, spread)
-    coords = np.array([[0.05, -0.9, 0.1], [1.0, 2.5, -3.0], [0.0, 5.0, 0.0]])
-    new, factor = move.get_proposal(coords, np.random.RandomState(4))
-    edges, share = ridge_cells(grid, log_post)
-
-    def log_q(x):  # the cell's density times a t with 4 dof, scale 1.2 x the spread
-        cell = np.searchsorted(edges, x[1], side="right") - 1
-        if not 0 <= cell < share.size:
-            return -np.inf
-        scale = 1.2 * spread[cell]
-        t = stats.multivariate_t(loc=np.zeros(2), shape=scale @ scale.T, df=4)
-        return np.log(share[cell] / np.diff(edges)[cell]) + t.logpdf(x[[0, 2]])
-
-    expected = [log_q(a) - log_q(b) for a, b in zip(coords, new, strict=True)]
-    np.testing.assert_allclose(factor[:2], expected[:2], rtol=1e-10)
-    assert factor[2] == -np.inf  # beyond the profile's ends
-    assert np.all(new[:, 0] != coords[:, 0]) and np.all(new[:, 2] != coords[:, 2])

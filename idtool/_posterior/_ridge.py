@@ -36,7 +36,7 @@ from jaxtyping import Array
 
 from idtool._fit._result import Z95, Z_AT_BOUND, one_sided
 from idtool._model._params import Param
-from idtool._posterior._ridge_jump import cell_edges, conditional_spread, ridge_jump
+from idtool._posterior._ridge_jump import cell_edges, ridge_jump
 
 __all__ = [
     "RIDGE_DECADES",
@@ -65,11 +65,11 @@ RIDGE_POINTS = 15
 # Where the posterior has mass the profile is then refined, each cell whose log-density
 # reaches within RIDGE_REFINE_WITHIN of the top halved RIDGE_REFINE_LEVELS times (a
 # quarter unit apart there). The sheared coordinates follow the profile linearly between
-# its points, and one internal unit of Kt is 2.25 decades in the middle of its range: a
-# chord of the curved ridge over a whole unit leaves the other parameters' offsets
-# curved along it, and the ridge jump's proposal (the profile's density and the spread
-# around it, per cell) is only as fine as the cells. e^-8 = 3e-4: cells below that hold
-# no walker's start and next to no posterior mass.
+# its points, and one internal unit of Kt is 2.25 decades in the middle of its range:
+# on the "all" bench (seed 602, Kt's posterior about three decades wide) a kink of the
+# coarse path inside the mass slowed the chain to 16,610 steps (slowest tau 124,
+# coupling_gain); refined, 3,164 steps (tau 50) for 35 more maximisations (5 s).
+# e^-8 = 3e-4: cells below that hold no walker's start and next to no posterior mass.
 RIDGE_REFINE_WITHIN = 8.0
 RIDGE_REFINE_LEVELS = 2
 _CHI2_95 = 3.84  # -2 log L rise at a 95% interval's end, one parameter (as the fit's)
@@ -85,16 +85,13 @@ class Ridge:
     ``grid`` (points,) the parameter's internal values; ``theta`` (points, ndim) the
     maximising vectors; ``log_post`` the log-posterior there (internal scale: prior and
     Jacobian included); ``log_lik`` the same without the parameter's own prior and
-    Jacobian (what the data say about it); ``spread`` (points, ndim - 1, ndim - 1) the
-    other parameters' conditional spread at each point (Cholesky factors,
-    :func:`~idtool._posterior._ridge_jump.conditional_spread`), when computed."""
+    Jacobian (what the data say about it)."""
 
     index: int
     grid: np.ndarray
     theta: np.ndarray
     log_post: np.ndarray
     log_lik: np.ndarray
-    spread: np.ndarray | None = None
 
 
 def weak_parameter(
@@ -182,7 +179,7 @@ def ridge_profile(
         grid, out, lp = _refined(grid, out, lp, index, log_post)
     p, prior = target.params[index], target.priors[index]
     own = np.array([float(prior.logpdf(p.value(g))) + float(p.log_jacobian(g)) for g in grid])
-    return Ridge(index, grid, out, lp, lp - own, conditional_spread(log_post, out, index))
+    return Ridge(index, grid, out, lp, lp - own)
 
 
 def _refined(
@@ -263,11 +260,9 @@ class RidgeTarget(eqx.Module):
     index: int = eqx.field(static=True)
     grid: Array  # (points,) the profiled parameter's internal values
     path: Array  # (points, ndim): the maximising vectors, the profiled column zero
-    # (points,) the profile's log-density (failed points 50 below its lowest) and
-    # (points, ndim - 1, ndim - 1) the other parameters' spread there: the ridge-jump
-    # move's proposal (idtool._posterior._ridge_jump)
+    # (points,) the profile's log-density (failed points 50 below its lowest): the
+    # ridge-jump move's proposal (idtool._posterior._ridge_jump)
     log_post: Array
-    spread: Array | None = None
 
     @classmethod
     def along(cls, base: Any, ridge: Ridge) -> RidgeTarget:
@@ -279,9 +274,7 @@ class RidgeTarget(eqx.Module):
         )
         path[:, ridge.index] = 0.0
         lp = np.where(ok, ridge.log_post, np.min(ridge.log_post[ok]) - 50.0)
-        spread = None if ridge.spread is None else jnp.asarray(ridge.spread)
-        grid = jnp.asarray(ridge.grid)
-        return cls(base, ridge.index, grid, jnp.asarray(path), jnp.asarray(lp), spread)
+        return cls(base, ridge.index, jnp.asarray(ridge.grid), jnp.asarray(path), jnp.asarray(lp))
 
     @classmethod
     def from_doc(cls, base: Any, doc: dict) -> RidgeTarget:
@@ -289,8 +282,7 @@ class RidgeTarget(eqx.Module):
         profile's density was recorded proposes uniformly along the ridge)."""
         grid = jnp.asarray(doc["grid"])
         lp = jnp.asarray(doc["log_post"]) if "log_post" in doc else jnp.zeros_like(grid)
-        spread = jnp.asarray(doc["spread"]) if doc.get("spread") is not None else None
-        return cls(base, int(doc["index"]), grid, jnp.asarray(doc["path"]), lp, spread)
+        return cls(base, int(doc["index"]), grid, jnp.asarray(doc["path"]), lp)
 
     def to_doc(self) -> dict:
         """The shear as data (recorded with the chain, which holds the sheared ``x``:
@@ -301,15 +293,13 @@ class RidgeTarget(eqx.Module):
             "grid": np.asarray(self.grid).tolist(),
             "path": np.asarray(self.path).tolist(),
             "log_post": np.asarray(self.log_post).tolist(),
-            "spread": None if self.spread is None else np.asarray(self.spread).tolist(),
             "formula": "theta[k] = x[k] + interp(x[index], grid, path[:, k])",
         }
 
     def jump_move(self):
         """The move that redraws the profiled coordinate along the ridge
         (:func:`idtool._posterior._ridge_jump.ridge_jump`)."""
-        spread = None if self.spread is None else np.asarray(self.spread)
-        return ridge_jump(self.index, np.asarray(self.grid), np.asarray(self.log_post), spread)
+        return ridge_jump(self.index, np.asarray(self.grid), np.asarray(self.log_post))
 
     @property
     def params(self) -> tuple[Param, ...]:

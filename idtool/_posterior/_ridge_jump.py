@@ -23,13 +23,11 @@ acceptance ratio is bounded where the uniform's part dominates).
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from scipy.special import gammaln
 
-__all__ = ["RIDGE_UNIFORM_SHARE", "cell_edges", "conditional_spread", "ridge_cells", "ridge_jump"]
+__all__ = ["RIDGE_UNIFORM_SHARE", "cell_edges", "ridge_cells", "ridge_jump"]
 
 # The uniform's share of the proposal density: the profile alone underweights the
 # plateaus (their volume in the other parameters is larger than the peak's: on seed 503
@@ -66,109 +64,27 @@ def ridge_cells(grid: np.ndarray, log_post: np.ndarray) -> tuple[np.ndarray, np.
     return edges, share
 
 
-def conditional_spread(
-    log_post: Callable[[np.ndarray], np.ndarray], theta: np.ndarray, index: int
-) -> np.ndarray:
-    """The Cholesky factors (points, d, d) of the other coordinates' spread at each
-    profile point ``theta`` (points, ndim), ``d = ndim - 1``: the inverse of minus the
-    log-posterior's Hessian in them (Laplace's approximation of their conditional law
-    given the profiled coordinate), by central differences of ``log_post`` (batched)
-    with steps of half the coordinate's own curvature width; eigenvalues of the
-    precision floored at 1/9 (an sd of at most 3 internal units: a direction the
-    posterior leaves flat is bounded by the parameter's prior, not by the data). A
-    point whose log-posterior is not finite gets the floor's spread."""
-    points, ndim = theta.shape
-    others = np.flatnonzero(np.arange(ndim) != index)
-    d = others.size
-    out = np.empty((points, d, d))
-    pairs = [(a, b) for a in range(d) for b in range(a, d)]
-    signs = ((1, 1), (1, -1), (-1, 1), (-1, -1))
-    for j in range(points):
-        x0 = theta[j]
-        probe = 1e-4
-        shifted = np.repeat(x0[None], 2 * d + 1, axis=0)
-        shifted[1 + np.arange(d), others] += probe
-        shifted[1 + d + np.arange(d), others] -= probe
-        f = log_post(shifted)
-        curv = (f[1 : 1 + d] + f[1 + d :] - 2.0 * f[0]) / probe**2
-        step = np.where(curv < 0.0, 0.5 / np.sqrt(np.abs(curv) + 1e-300), 0.5)
-        step = np.clip(step, 1e-6, 0.5)
-        rows = []
-        for a, b in pairs:
-            for sa, sb in signs:
-                x = x0.copy()
-                x[others[a]] += sa * step[a]
-                x[others[b]] += sb * step[b]
-                rows.append(x)
-        f = log_post(np.array(rows)).reshape(len(pairs), 4)
-        hess = np.zeros((d, d))
-        for (a, b), (fpp, fpm, fmp, fmm) in zip(pairs, f, strict=True):
-            hess[a, b] = hess[b, a] = (fpp - fpm - fmp + fmm) / (4.0 * step[a] * step[b])
-        if not np.all(np.isfinite(hess)):
-            out[j] = 3.0 * np.eye(d)
-            continue
-        evals, evecs = np.linalg.eigh(-0.5 * (hess + hess.T))
-        cov = (evecs / np.maximum(evals, 1.0 / 9.0)) @ evecs.T
-        out[j] = np.linalg.cholesky(0.5 * (cov + cov.T))
-    return out
-
-
-# The other coordinates' proposal: a Student t with 4 degrees of freedom around the
-# ridge, scaled 1.2 times the Laplace spread (heavier tails than the conditional law,
-# whose log-sds are skewed, so the independence proposal's weights stay bounded).
-_T_DOF = 4.0
-_T_SCALE = 1.2
-
-
-def ridge_jump(
-    index: int, grid: np.ndarray, log_post: np.ndarray, spread: np.ndarray | None = None
-):
+def ridge_jump(index: int, grid: np.ndarray, log_post: np.ndarray):
     """An ``emcee.moves.MHMove`` that redraws coordinate ``index`` of every walker from
-    the ridge's proposal density (:func:`ridge_cells`) and, given ``spread`` (the
-    Cholesky factors of :func:`conditional_spread`, one per profile point), the other
-    (sheared) coordinates too, from a Student t around the ridge with the spread of the
-    proposed point's cell; without ``spread`` they are kept. The Hastings factor is
-    ``log q(x) - log q(x')``. A walker outside the cells' span (beyond the profile's
-    ends) is not moved by it (factor ``-inf``)."""
+    the ridge's proposal density (:func:`ridge_cells`), the other coordinates kept;
+    the Hastings factor ``log q(z) - log q(z')``. A walker outside the cells' span
+    (beyond the profile's ends) is not moved by it (factor ``-inf``)."""
     import emcee
 
     edges, share = ridge_cells(grid, log_post)
     log_density = np.log(share / np.diff(edges))
-    ncells = share.size
-    if spread is not None:
-        d = spread.shape[1]
-        log_det = np.sum(np.log(_T_SCALE * np.diagonal(spread, axis1=1, axis2=2)), axis=1)
-        norm = (
-            gammaln(0.5 * (_T_DOF + d))
-            - gammaln(0.5 * _T_DOF)
-            - 0.5 * d * np.log(_T_DOF * np.pi)
-            - log_det
-        )
 
-    def log_q(x: np.ndarray) -> np.ndarray:
-        cell = np.searchsorted(edges, x[:, index], side="right") - 1
-        inside = (cell >= 0) & (cell < ncells)
-        cell = np.clip(cell, 0, ncells - 1)
-        out = np.where(inside, log_density[cell], -np.inf)
-        if spread is None:
-            return out
-        y = np.delete(x, index, axis=1)[..., None]
-        white = np.linalg.solve(_T_SCALE * spread[cell], y)[..., 0]
-        r2 = np.sum(white**2, axis=1)
-        return out + norm[cell] - 0.5 * (_T_DOF + d) * np.log1p(r2 / _T_DOF)
+    def log_q(z: np.ndarray) -> np.ndarray:
+        cell = np.searchsorted(edges, z, side="right") - 1
+        inside = (cell >= 0) & (cell < share.size)
+        return np.where(inside, log_density[np.clip(cell, 0, share.size - 1)], -np.inf)
 
     def propose(coords: np.ndarray, random: Any) -> tuple[np.ndarray, np.ndarray]:
         n = coords.shape[0]
-        cell = random.choice(ncells, size=n, p=share)
+        cell = random.choice(share.size, size=n, p=share)
+        z_new = edges[cell] + random.rand(n) * (edges[cell + 1] - edges[cell])
         new = np.array(coords, float, copy=True)
-        new[:, index] = edges[cell] + random.rand(n) * (edges[cell + 1] - edges[cell])
-        if spread is not None:
-            g = (
-                random.standard_normal((n, d))
-                / np.sqrt(random.chisquare(_T_DOF, n) / _T_DOF)[:, None]
-            )
-            y = np.einsum("nij,nj->ni", _T_SCALE * spread[cell], g)
-            new[:, np.flatnonzero(np.arange(coords.shape[1]) != index)] = y
-        return new, log_q(coords) - log_q(new)  # -inf: a walker outside
+        new[:, index] = z_new
+        return new, log_q(coords[:, index]) - log_q(z_new)  # -inf: a walker outside
 
     return emcee.moves.MHMove(propose)
