@@ -150,7 +150,7 @@ SPLIT_BY_PARAMETER = ("tests/test_notebooks.py",)
 # taken as light, and goes last.
 FILE_SECONDS: dict[str, float] = {
     "tests/test_api.py": 645,
-    "tests/test_compare.py": 455,  # 2026-11-25: the sdof test noise-only, 61.4 -> 59.1 CPU s
+    "tests/test_compare.py": 335,  # 2026-11-26: two compares --no-figures, 87.8 -> 64.3 CPU s
     "tests/test_coverage.py": 370,
     "tests/test_notebooks.py[02_fit_new_material]": 155,  # 94.5 -> 51.2 CPU s (5 fits)
     "tests/test_notebooks.py[03_uncertainty_design_maps]": 210,
