@@ -156,7 +156,7 @@ FILE_SECONDS: dict[str, float] = {
     "tests/test_notebooks.py[03_uncertainty_design_maps]": 210,
     "tests/test_notebooks.py[01_seed_model]": 125,
     "tests/test_sample_until_converged.py": 270,  # the example's fit: the bank's
-    "tests/test_coupling_sdof.py": 240,  # 2026-11-26: D = 0 profiled once, 154.9 -> 138.8 CPU s
+    "tests/test_coupling_sdof.py": 215,  # 2026-11-26: 154.9 -> ~124 CPU s (D = 0 once, jit)
     "tests/test_coupling_laws.py": 250,  # 2026-11-26: 164.8 -> 141.8 CPU s
     "tests/test_transducer.py": 190,  # 2026-11-26: two programs fewer, 90.3 -> 68.9 CPU s
     "tests/test_sample.py": 200,

@@ -135,7 +135,7 @@ def test_more_load_less_amplitude_and_less_reduction():
         a = coupling.slip_amplitude_m(law, 0.5, load, SPEED, W, 85e-6)
         return a, idtool.prescribed_cycle_average(law, SPEED, a, W).friction_ratio
 
-    a, fr = jax.vmap(one)(loads)
+    a, fr = jax.jit(jax.vmap(one))(loads)  # one program, not the solve op by op
     assert np.all(np.diff(np.asarray(a)) < 0.0)
     assert np.all(np.diff(np.asarray(fr)) > 0.0)
     assert (
