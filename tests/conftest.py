@@ -150,15 +150,15 @@ SPLIT_BY_PARAMETER = ("tests/test_notebooks.py",)
 # taken as light, and goes last.
 FILE_SECONDS: dict[str, float] = {
     "tests/test_api.py": 645,
-    "tests/test_compare.py": 455,  # 2026-11-25: the sdof test noise-only, 61.4 -> 59.1 CPU s
+    "tests/test_compare.py": 335,  # 2026-11-26: two compares --no-figures, 87.8 -> 64.3 CPU s
     "tests/test_coverage.py": 370,
     "tests/test_notebooks.py[02_fit_new_material]": 155,  # 94.5 -> 51.2 CPU s (5 fits)
     "tests/test_notebooks.py[03_uncertainty_design_maps]": 210,
     "tests/test_notebooks.py[01_seed_model]": 125,
     "tests/test_sample_until_converged.py": 270,  # the example's fit: the bank's
-    "tests/test_coupling_sdof.py": 265,  # predictions 40 -> 29 CPU s (kriging rows)
-    "tests/test_coupling_laws.py": 290,
-    "tests/test_transducer.py": 250,
+    "tests/test_coupling_sdof.py": 215,  # 2026-11-26: 154.9 -> ~124 CPU s (D = 0 once, jit)
+    "tests/test_coupling_laws.py": 250,  # 2026-11-26: 164.8 -> 141.8 CPU s
+    "tests/test_transducer.py": 190,  # 2026-11-26: two programs fewer, 90.3 -> 68.9 CPU s
     "tests/test_sample.py": 200,
     "tests/test_parameter_settings.py": 190,
     "tests/test_variability.py": 150,  # the example's fit: the bank's

@@ -266,15 +266,21 @@ def test_bad_input_exits_2_and_writes_nothing(fits, tmp_path, capsys):
 
 def test_posterior_and_extrapolation(fits, tmp_path):
     """A sampled fit compares from its posterior (flagged unconverged after 150 steps);
-    a load beyond the tested range is an extrapolation banner."""
+    a load beyond the tested range is an extrapolation banner. Without the figures
+    (``--no-figures``: the numbers are what is read here; the ``compared`` fixture draws
+    them): none written, none listed, the page says so."""
     sampled = tmp_path / "Bs"
     shutil.copytree(fits["B"], sampled)
     argv = ["sample", str(sampled), "--walkers", "20", "--steps", "150", "--no-progress", "-q"]
     assert main(argv) in (0, 3)  # 3: written, but too short to converge
     out = tmp_path / "cmp"
     argv = ["compare", str(fits["A"]), str(sampled), "--load", "670,1000", "--amplitude", "0.6"]
+    argv += ["--no-figures"]
     assert main([*argv, "--out", str(out), "--targets", "40", "--draws", "400", "-q"]) == 0
     doc = _doc(out)
+    assert doc["figures"] == [] and not list(out.glob("*.png"))
+    assert _images((out / "compare.html").read_text()) == []
+    assert "Not drawn: compared with --no-figures." in (out / "compare.html").read_text()
     assert [f["posterior"] for f in doc["fits"]] == [False, True]
     assert doc["fits"][1]["draws"]["source"] == "posterior"
     assert doc["estimates"]["Bs"]["Kt"]["source"] == "posterior"
@@ -299,7 +305,9 @@ def test_an_sdof_fit_compares_and_says_who_fixed_what(fits, tmp_path):
     figures, 2 x 50 points per draw, each a harmonic-balance solve, took 62 CPU s of
     the compare at 400 draws, 30 at 100. The noise-only model, as nothing here reads
     the pull-to-pull scatter: the variability's estimate and its discrepancy in every
-    FR draw of the compare cost CPU s for no assertion.)"""
+    FR draw of the compare cost CPU s for no assertion. Without the figures,
+    ``--no-figures``: their curves, 100 draws x 2 x 50 points of harmonic-balance solves,
+    are read by no assertion here.)"""
     data = idtool.load_fit(fits["B"]).dataset
     horn = idtool.TransducerSpec(
         modal_mass_kg=1.0, natural_frequency_hz=1.001 * data.rig.vibration_frequency_hz
@@ -312,6 +320,7 @@ def test_an_sdof_fit_compares_and_says_who_fixed_what(fits, tmp_path):
     fit.save(sdof, plots=False)  # compare reads fit.json and the state, not figures
     out = tmp_path / "cmp"
     argv = ["compare", str(fits["A"]), str(sdof), "--out", str(out), "--draws", "100"]
+    argv += ["--no-figures"]
     assert main([*argv, "-q"]) == 0
     doc = _doc(out)
     detuning = doc["estimates"]["Bsdof"]["detuning_n_m"]

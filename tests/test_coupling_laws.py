@@ -58,6 +58,16 @@ def test_the_amplitude_grows_with_the_command_and_falls_with_the_load():
         assert np.all(np.diff(amp) <= 0.0), name
 
 
+# at module level: both detunings below run the same programs (one per law), compiled
+# once (a jit made inside the test was compiled anew for each: 2 x 5 programs)
+@jax.jit
+def _round_trip(coupling, law, alpha, load):
+    w, speed = 2 * np.pi * 20e3, 0.025
+    a = coupling.slip_amplitude_m(law, alpha, load, speed, w, A_MAX)
+    cycle = idtool.prescribed_cycle_average(law, speed, a, w)
+    return coupling.drive_fraction(law, a, cycle, load, w, A_MAX)
+
+
 @pytest.mark.parametrize("detuning_n_m", [0.0, 1.5e8])
 def test_drive_fraction_inverts_the_slip_amplitude(detuning_n_m):
     """``drive_fraction`` (the inverse prediction's map from slip amplitude back to the
@@ -65,14 +75,7 @@ def test_drive_fraction_inverts_the_slip_amplitude(detuning_n_m):
     through the default bisection (2^-52), the sdof one in closed form from the
     harmonics at the loaded amplitude, which its solve balances to ~1e-10 in log force
     (tests/test_coupling_sdof.py), hence 1e-9 here; detuned as well."""
-    w, speed = 2 * np.pi * 20e3, 0.025
-
-    @jax.jit
-    def round_trip(coupling, law, alpha, load):
-        a = coupling.slip_amplitude_m(law, alpha, load, speed, w, A_MAX)
-        cycle = idtool.prescribed_cycle_average(law, speed, a, w)
-        return coupling.drive_fraction(law, a, cycle, load, w, A_MAX)
-
+    round_trip = _round_trip
     for name in COUPLINGS:
         values = {p.name: p.start for p in COUPLINGS.get(name).fit_params}
         values |= {"coupling_gain": 0.03, "loss_stiffness_n_m": 2.9e8}

@@ -135,7 +135,7 @@ def test_more_load_less_amplitude_and_less_reduction():
         a = coupling.slip_amplitude_m(law, 0.5, load, SPEED, W, 85e-6)
         return a, idtool.prescribed_cycle_average(law, SPEED, a, W).friction_ratio
 
-    a, fr = jax.vmap(one)(loads)
+    a, fr = jax.jit(jax.vmap(one))(loads)  # one program, not the solve op by op
     assert np.all(np.diff(np.asarray(a)) < 0.0)
     assert np.all(np.diff(np.asarray(fr)) > 0.0)
     assert (
@@ -155,8 +155,15 @@ def test_the_amplitude_has_exact_derivatives():
         return jnp.log(c.slip_amplitude_m(law, 0.5, 450.0, SPEED, W, 85e-6))
 
     x = jnp.array([0.028, 2.9e8, 5e7, 0.3, 1e9])
-    jac = np.asarray(jax.jacfwd(amplitude)(x))
-    f = jax.jit(amplitude)
+    # one compiled program for the derivatives and the differences' values (op by op,
+    # jacfwd through the root's solve, and a second program of the value alone, cost
+    # more than the whole test's arithmetic)
+    jac_and_value = jax.jit(jax.jacfwd(lambda z: (amplitude(z),) * 2, has_aux=True))
+    jac = np.asarray(jac_and_value(x)[0])
+
+    def f(z):
+        return jac_and_value(z)[1]
+
     for i in range(x.size):
         h = 1e-5 * float(x[i])
         fd = (float(f(x.at[i].add(h))) - float(f(x.at[i].add(-h)))) / (2.0 * h)
@@ -207,8 +214,14 @@ def test_the_loss_gradient_matches_finite_differences():
     def loss(zz):
         return 0.5 * jnp.sum(model.residuals(zz, 0.5) ** 2)
 
-    grad = np.asarray(jax.jit(jax.grad(loss))(z))
-    f = jax.jit(loss)
+    # one compiled program for the gradient and the differences' values (a second, of
+    # the value alone, would cost a compilation of the sdof law's residuals again)
+    value_and_grad = jax.jit(jax.value_and_grad(loss))
+    grad = np.asarray(value_and_grad(z)[1])
+
+    def f(zz):
+        return value_and_grad(zz)[0]
+
     for i in range(4):
         h = 1e-6
         fd = (float(f(z.at[i].add(h))) - float(f(z.at[i].add(-h)))) / (2 * h)

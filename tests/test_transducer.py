@@ -118,11 +118,15 @@ def test_brute_force_one_period_from_the_periodic_state():
 
 
 def test_fourth_order_convergence_in_steps():
+    """Against 256 steps per period, the program the other tests here run (a step count
+    is a program of its own: 6 CPU s to compile): its own error, 8e-10, is 1/300 of
+    ``e64`` (against 512 steps: e64 2.369e-7, e32 / e64 14.48; against 256: 2.361e-7,
+    14.53)."""
     p = idtool.table2()
     vt = vt_for(p, 0.3)
     fr = [
         float(idtool.transducer_steady_state(p, vt, steps_per_period=n).friction_ratio)
-        for n in (32, 64, 512)
+        for n in (32, 64, 256)
     ]
     e32, e64 = abs(fr[0] - fr[2]), abs(fr[1] - fr[2])
     assert e64 < 1e-6
@@ -130,15 +134,18 @@ def test_fourth_order_convergence_in_steps():
 
 
 def test_paper_trends_at_fixed_velocity_ratio():
-    """Section 3.6: FR falls with Fe, rises with mu and with m; PDR rises with Fe."""
-    vrs = [0.2, 0.5, 0.8]
+    """Section 3.6: FR falls with Fe, rises with mu and with m; PDR rises with Fe. At
+    VR 0.2, 0.5 and 0.8, in the batch shape of ``table2_states`` (3 transducers x 5
+    ratios: one compiled program for both; the last two ratios are not read)."""
+    vrs = [0.2, 0.5, 0.8, 0.2, 0.2]
     fe = steady_many([idtool.table2(force_amplitude_n=f) for f in (480.0, 960.0, 1920.0)], vrs)
     mu = steady_many([idtool.table2(friction_coefficient=u) for u in (0.05, 0.1, 0.4)], vrs)
     mass = steady_many([idtool.table2(mass_kg=m) for m in (0.01, 0.02, 0.08)], vrs)
-    assert np.all(np.diff(np.asarray(fe.friction_ratio), axis=0) < 0)
-    assert np.all(np.diff(np.asarray(fe.power_ratio), axis=0) > 0)
-    assert np.all(np.diff(np.asarray(mu.friction_ratio), axis=0) > 0)
-    assert np.all(np.diff(np.asarray(mass.friction_ratio), axis=0) > 0)
+    read = slice(0, 3)
+    assert np.all(np.diff(np.asarray(fe.friction_ratio)[:, read], axis=0) < 0)
+    assert np.all(np.diff(np.asarray(fe.power_ratio)[:, read], axis=0) > 0)
+    assert np.all(np.diff(np.asarray(mu.friction_ratio)[:, read], axis=0) > 0)
+    assert np.all(np.diff(np.asarray(mass.friction_ratio)[:, read], axis=0) > 0)
 
 
 def test_march_from_rest_reaches_the_damped_orbit_and_balances():

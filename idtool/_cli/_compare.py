@@ -53,9 +53,9 @@ def _run(args: argparse.Namespace) -> int:
         max_draws=args.draws,
         seed=args.seed,
     )
-    page = comparison.write(out, force=args.force)
+    page = comparison.write(out, force=args.force, figures=not args.no_figures)
     if args.json:
-        print(json.dumps(comparison.to_dict(), indent=1))
+        print(json.dumps(comparison.to_dict(figures=not args.no_figures), indent=1))
     else:
         print(comparison.summary())
         print(f"compare: {page}")
@@ -96,6 +96,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", help="output folder (default: compare-A-B beside the first fit)")
     p.add_argument("--force", action="store_true", help="replace an existing --out")
     p.add_argument("--json", action="store_true", help="print compare.json")
+    p.add_argument(
+        "--no-figures",
+        action="store_true",
+        help="leave out the two figures (FR against amplitude and load): their curves "
+        "solve every fit's contact model per draw at 100 points, most of the time of "
+        "comparing sdof fits",
+    )
     p.add_argument("--draws", type=int, default=2000, help="draws per fit (default 2000)")
     p.add_argument("--seed", type=int, default=0, help="seed of the draws (default 0)")
     p.set_defaults(func=_run)

@@ -100,8 +100,11 @@ def detuning_profile(result: FitResult, grid_n_m=GRID_N_M) -> tuple[Profile, np.
     at = [z0] * values.size
     mid = int(np.argmin(np.abs(values)))
     loaded = _loaded_start(free, z0, result)
-    for order in (range(mid, values.size), range(mid, -1, -1)):
-        z = z0
+    # outwards from D = 0 either side, each point warm-started from its neighbour's
+    # optimum; D = 0 is fitted once (the downward pass starts from its optimum, as it
+    # would from the same two starts again)
+    for order in (range(mid, values.size), range(mid - 1, -1, -1)):
+        z = z0 if order.start == mid else at[mid]
         for j in order:
             outs = []
             for start in (z.copy(), loaded.copy()):

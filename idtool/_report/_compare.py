@@ -71,10 +71,14 @@ class Comparison(ComparisonRecord):
     ``grid``); ``banners``: what must be read first (unconverged chains, misfit,
     extrapolation); ``warnings``: those and every other doubt."""
 
-    def write(self, out: str | os.PathLike, *, force: bool = False) -> Path:
+    def write(self, out: str | os.PathLike, *, force: bool = False, figures: bool = True) -> Path:
         """Write ``compare.html``, ``compare.json`` and the figures into the folder
         ``out`` all or nothing; an existing ``out`` is replaced only with ``force``.
-        Returns the path of ``compare.html``."""
+        ``figures=False`` leaves out the figures (FR against amplitude and load, every
+        fit's band overlaid): their curves solve each fit's contact model for up to 400
+        draws at 100 points, most of the time of a comparison of sdof fits; the page then
+        says so and ``compare.json`` lists no figures. Returns the path of
+        ``compare.html``."""
         curves = [
             Curve(
                 f.label,
@@ -85,9 +89,13 @@ class Comparison(ComparisonRecord):
             for f in self.fits
         ]
         with atomic_output_dir(out, force=force) as tmp:
-            paths = compare_figures(curves, self.load_n, self.amplitude, self.speed_m_s, tmp)
+            paths = (
+                compare_figures(curves, self.load_n, self.amplitude, self.speed_m_s, tmp)
+                if figures
+                else []
+            )
             (tmp / "compare.html").write_text(compare_html(self, paths))
-            doc = json.dumps(self.to_dict(), indent=1, allow_nan=False)
+            doc = json.dumps(self.to_dict(figures=figures), indent=1, allow_nan=False)
             (tmp / "compare.json").write_text(doc + "\n")
         return Path(out) / "compare.html"
 

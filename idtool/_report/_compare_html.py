@@ -173,18 +173,23 @@ def _header(c: ComparisonRecord) -> str:
 
 
 def compare_html(c: ComparisonRecord, figures: Sequence[Path]) -> str:
-    """The page of ``c`` with the figures ``figures`` (FR against amplitude, load)."""
+    """The page of ``c`` with the figures ``figures`` (FR against amplitude, load; none:
+    the section says they were left out)."""
     prov = {f.label: f.fit.artefact.summary.provenance for f in c.fits}
     sec = {
         SECTIONS[0]: f'<div class="answer">{_answer(c)}</div>',
         SECTIONS[1]: _amplitudes(c),
         SECTIONS[2]: _estimates(c),
         SECTIONS[3]: (
-            "<p>Each fit's mean friction ratio, median and 95% band (the model's "
-            "discrepancy between operating points included); the bands widen away from "
-            "each fit's tested range (bars above FR = 1).</p>"
-            + img(figures[0], "FR against amplitude, fits overlaid")
-            + img(figures[1], "FR against load, fits overlaid")
+            (
+                "<p>Each fit's mean friction ratio, median and 95% band (the model's "
+                "discrepancy between operating points included); the bands widen away "
+                "from each fit's tested range (bars above FR = 1).</p>"
+                + img(figures[0], "FR against amplitude, fits overlaid")
+                + img(figures[1], "FR against load, fits overlaid")
+            )
+            if figures
+            else '<p class="note">Not drawn: compared with --no-figures.</p>'
         ),
         SECTIONS[4]: (
             "<ul>" + "".join(f"<li>{html.escape(w)}</li>" for w in c.warnings) + "</ul>"

@@ -147,8 +147,9 @@ class ComparisonRecord:
         rows = [(n, a, self.speed_m_s) for n in self.load_n for a in self.amplitude]
         return np.array(rows, float)
 
-    def to_dict(self) -> dict:
-        """The ``compare.json`` document."""
+    def to_dict(self, figures: bool = True) -> dict:
+        """The ``compare.json`` document; ``figures``: whether the figures are written
+        beside it (:meth:`idtool.Comparison.write`), else ``"figures"`` is empty."""
         return {
             "idtool_version": __version__,
             "id": self.id,
@@ -168,7 +169,7 @@ class ComparisonRecord:
             "targets_percent": list(self.targets),
             "amplitudes": {f.label: [a.to_dict() for a in f.amplitudes] for f in self.fits},
             "estimates": {f.label: f.estimates() for f in self.fits},
-            "figures": list(FIGURES),
+            "figures": list(FIGURES) if figures else [],
             "banners": list(self.banners),
             "warnings": list(self.warnings),
         }
