@@ -12,18 +12,15 @@ from idtool._fit._result import Z_AT_BOUND, Estimate, interval_statement, weakly
 from idtool._model._params import Param
 from idtool._posterior._prior import Prior
 from idtool._posterior._ridge import (
-    RIDGE_FAR_MASS,
     RIDGE_POINTS,
     RIDGE_REFINE_LEVELS,
     RIDGE_REFINE_WITHIN,
     Ridge,
     RidgeTarget,
-    far_mass,
     open_sides,
     ridge_profile,
     ridge_walkers,
     weak_parameter,
-    widest_parameter,
 )
 from idtool._posterior._start import MAX_START_SD_Z, initial_walkers, start_within
 from idtool._report._fit_text import _est
@@ -216,19 +213,3 @@ def test_an_interval_over_two_decades_is_said_to_be_weakly_identified():
     # the caller that knows better overrides the rule (a scatter sd's spike towards zero)
     assert interval_statement(1e-7, 0.03, "", weak=False) == "[1e-07, 0.03]"
     assert "weakly" in interval_statement(1e-7, 0.03, "")
-
-
-def test_far_mass_is_the_profiles_share_beyond_the_peaks_neighbours():
-    z = np.linspace(-Z_AT_BOUND, Z_AT_BOUND, RIDGE_POINTS)  # one unit apart
-    # a peak at z = 0 and plateaus 5 below: 12 cells of e^-5 against 1 + 2 e^-5
-    lp = np.where(z == 0.0, 0.0, -5.0)
-    ridge = Ridge(0, z, np.zeros((z.size, 2)), lp, lp)
-    far = 12 * np.exp(-5.0)  # every cell one unit wide, the ends half a unit beyond
-    assert np.isclose(far_mass(ridge), far / (1.0 + 2 * np.exp(-5.0) + far))
-    assert far_mass(ridge) > RIDGE_FAR_MASS  # sampled along its ridge
-    deep = Ridge(0, z, np.zeros((z.size, 2)), np.where(z == 0.0, 0.0, -12.0), lp)
-    assert far_mass(deep) < RIDGE_FAR_MASS  # the chain started at the peak is kept
-    # the widest of the physical log-scale parameters, whatever its width
-    narrow = np.diag([0.02**2, 0.01**2])
-    assert widest_parameter((KT, GAIN), np.array([0.0, 1.0]), narrow, 2)[0] == 0
-    assert widest_parameter((KT, GAIN), np.array([0.0, 1.0]), narrow, 0) == (None, 0.0)

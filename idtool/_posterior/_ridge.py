@@ -40,19 +40,15 @@ from idtool._posterior._ridge_jump import cell_edges, ridge_jump
 
 __all__ = [
     "RIDGE_DECADES",
-    "RIDGE_FAR_MASS",
     "RIDGE_POINTS",
     "RIDGE_REFINE_LEVELS",
     "RIDGE_REFINE_WITHIN",
     "Ridge",
     "RidgeTarget",
-    "far_mass",
     "open_sides",
-    "refine_profile",
     "ridge_profile",
     "ridge_walkers",
     "weak_parameter",
-    "widest_parameter",
 ]
 
 # A log-scale parameter whose Wald 95% interval spans more decades than this is profiled.
@@ -75,18 +71,6 @@ RIDGE_POINTS = 15
 # coupling_gain); refined, 3,164 steps (tau 50) for 35 more maximisations (5 s).
 # e^-8 = 3e-4: cells below that hold no walker's start and next to no posterior mass.
 RIDGE_REFINE_WITHIN = 8.0
-# A parameter whose Wald interval is narrower than RIDGE_DECADES is still sampled along
-# its ridge when its coarse profile puts more than this share of its mass over three
-# decades from the peak (:func:`far_mass`): on the "scatter" bench (seed 101; Kt's Wald
-# interval 0.4 decades, far mass 0.049) a chain started at the peak found Kt's plateaus
-# and ran to the 10-minute bound unconverged (71,869 steps, coupling_gain tau 1524, Kt
-# over 7.7 decades). Below it the chain started at the peak is kept: on the example
-# (far mass 0.018; Kt's marginal by importance sampling along the ridge puts about
-# 0.5% on the plateaus, 8-11 below the peak) it converges in 6398 steps with Kt's 95%
-# interval [8.8e8, 1.16e9] N/m; sampled along the ridge, [8.8e8, 1.20e9] in 33,983
-# steps (274 s at load 6). The clean, actuator and mains-hum benches (seeds 1, 201,
-# 301) have 0.0075, 0.0033 and 0.094.
-RIDGE_FAR_MASS = 0.03
 RIDGE_REFINE_LEVELS = 2
 _CHI2_95 = 3.84  # -2 log L rise at a 95% interval's end, one parameter (as the fit's)
 # Central-difference step on the internal scale: truncation error ~ step^2 (1e-10),
@@ -110,14 +94,14 @@ class Ridge:
     log_lik: np.ndarray
 
 
-def widest_parameter(
+def weak_parameter(
     params: tuple[Param, ...], z: np.ndarray, cov: np.ndarray, n_physical: int
-) -> tuple[int | None, float]:
+) -> int | None:
     """The physical log-scale parameter whose Wald 95% interval (internal ``z`` +- 1.96
     sd, through the transform as the fit's, :func:`idtool._fit._result.estimate_of`)
-    spans the most decades, and that width; at a bound of its range (beyond
-    :data:`Z_AT_BOUND`) counts as its whole range. (None, 0) when there is none."""
-    best, widest = None, 0.0
+    spans the most decades, if more than :data:`RIDGE_DECADES`; at a bound of its range
+    (beyond :data:`Z_AT_BOUND`) counts as unbounded. None when every one is narrower."""
+    best, widest = None, RIDGE_DECADES
     for i, p in enumerate(params[:n_physical]):
         if p.kind != "log":
             continue
@@ -127,31 +111,9 @@ def widest_parameter(
         else:
             lo, hi = (float(p.value(float(z[i] + s * Z95 * sd))) for s in (-1.0, 1.0))
             decades = math.log10(hi / lo)
-        if best is None or decades > widest:
+        if decades > widest:
             best, widest = i, decades
-    return best, widest
-
-
-def weak_parameter(
-    params: tuple[Param, ...], z: np.ndarray, cov: np.ndarray, n_physical: int
-) -> int | None:
-    """The :func:`widest_parameter` if its Wald interval spans more than
-    :data:`RIDGE_DECADES`, else None."""
-    best, widest = widest_parameter(params, z, cov, n_physical)
-    return best if widest > RIDGE_DECADES else None
-
-
-def far_mass(ridge: Ridge) -> float:
-    """The share of the profile's mass (``exp(log_post)`` times each point's cell)
-    outside the highest point's cell and its two neighbours': on the coarse profile,
-    what lies more than one and a half internal units (over three decades of Kt) from
-    the peak. An estimate (the profile is a maximum, not the marginal), enough to tell
-    plateaus that hold mass from tails that do not."""
-    w = np.exp(ridge.log_post - np.max(ridge.log_post)) * np.diff(cell_edges(ridge.grid))
-    w = np.where(np.isfinite(w), w, 0.0)
-    top = int(np.argmax(w))
-    near = w[max(top - 1, 0) : top + 2].sum()
-    return float(1.0 - near / w.sum())
+    return best
 
 
 def _maximise_others(
@@ -190,11 +152,7 @@ def _maximise_others(
 
 
 def ridge_profile(
-    log_post: Callable[[np.ndarray], np.ndarray],
-    target: Any,
-    theta: np.ndarray,
-    index: int,
-    coarse: bool = False,
+    log_post: Callable[[np.ndarray], np.ndarray], target: Any, theta: np.ndarray, index: int
 ) -> Ridge:
     """The log-posterior ``log_post`` (batched, (n, ndim) -> (n,)) of ``target`` (a
     :class:`~idtool._posterior._levels.LevelsTarget`: its parameters and priors) profiled
@@ -202,8 +160,8 @@ def ridge_profile(
     spanning its range, walking out from the point nearest ``theta`` in both directions,
     each maximisation (:func:`_maximise_others`) warm-started from its neighbour's, so
     the profile follows the ridge from one plateau to the other (the other plateau's
-    coupling gain is 10 of its sds away from the fit's); then, unless ``coarse``,
-    refined where the posterior has mass (:func:`refine_profile`)."""
+    coupling gain is 10 of its sds away from the fit's); then refined where the
+    posterior has mass (:func:`_refined`)."""
     grid = np.linspace(-Z_AT_BOUND, Z_AT_BOUND, RIDGE_POINTS)
     theta = np.array(theta, float)
     theta[index] = float(np.clip(theta[index], -Z_AT_BOUND, Z_AT_BOUND))
@@ -217,28 +175,11 @@ def ridge_profile(
             out[j], lp[j] = _maximise_others(x, index, log_post)
             if np.isfinite(lp[j]):
                 x = out[j].copy()
-    ridge = _ridge(target, index, grid, out, lp)
-    return ridge if coarse else refine_profile(ridge, log_post, target)
-
-
-def refine_profile(
-    ridge: Ridge, log_post: Callable[[np.ndarray], np.ndarray], target: Any
-) -> Ridge:
-    """``ridge`` refined where the posterior has mass: :data:`RIDGE_REFINE_LEVELS`
-    times, a point added in the middle of each cell within :data:`RIDGE_REFINE_WITHIN`
-    of the top (:func:`_refined`)."""
-    grid, out, lp = ridge.grid, ridge.theta, ridge.log_post
     for _ in range(RIDGE_REFINE_LEVELS):
-        grid, out, lp = _refined(grid, out, lp, ridge.index, log_post)
-    return _ridge(target, ridge.index, grid, out, lp)
-
-
-def _ridge(target: Any, index: int, grid, theta, lp) -> Ridge:
-    """The :class:`Ridge`, its likelihood without the parameter's own prior and
-    Jacobian."""
+        grid, out, lp = _refined(grid, out, lp, index, log_post)
     p, prior = target.params[index], target.priors[index]
     own = np.array([float(prior.logpdf(p.value(g))) + float(p.log_jacobian(g)) for g in grid])
-    return Ridge(index, grid, theta, lp, lp - own)
+    return Ridge(index, grid, out, lp, lp - own)
 
 
 def _refined(

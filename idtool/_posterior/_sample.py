@@ -69,15 +69,11 @@ from idtool._posterior._prior import (
     read_priors,
 )
 from idtool._posterior._ridge import (
-    RIDGE_FAR_MASS,
     RidgeTarget,
-    far_mass,
     open_sides,
-    refine_profile,
     ridge_profile,
     ridge_walkers,
     weak_parameter,
-    widest_parameter,
 )
 from idtool._posterior._runner import FIRST_CHECK, MAX_MINUTES, MAX_STEPS, ChainStore, run_chain
 from idtool._posterior._start import find_start, initial_walkers, start_within
@@ -274,17 +270,10 @@ def sample_posterior(
         fn = LogPosterior(levels_target, _batch(walkers, noise))
         rng = np.random.default_rng(seed)
         weak = weak_parameter(levels_target.params, theta, cov, k)
-        widest = widest_parameter(levels_target.params, theta, cov, k)[0]
-        ridge = None
-        if weak is not None:  # the data barely bound it
-            ridge = ridge_profile(fn, levels_target, theta, weak)
-        elif widest is not None:  # bound, but its plateaus may hold mass far away
-            coarse = ridge_profile(fn, levels_target, theta, widest, coarse=True)
-            if far_mass(coarse) > RIDGE_FAR_MASS:
-                ridge = refine_profile(coarse, fn, levels_target)
-        if ridge is not None:  # sampled along its profile
+        if weak is not None:  # the data barely bound it: sampled along its profile
             capped = start_within(theta, cov, params)[1]
-            one_sided = {params[ridge.index].name: open_sides(ridge)}
+            ridge = ridge_profile(fn, levels_target, theta, weak)
+            one_sided = {params[weak].name: open_sides(ridge)}
             sheared = RidgeTarget.along(levels_target, ridge)
             fn = LogPosterior(sheared, _batch(walkers, noise))
             theta, cov = ridge_walkers(ridge, capped, walkers, rng)
