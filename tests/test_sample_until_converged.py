@@ -131,30 +131,37 @@ def default_fit(tmp_path_factory, example_default_run):
     return folder
 
 
-def test_a_default_sample_of_a_default_fit_converges(default_fit, tmp_path):
-    fit = idtool.load_fit(default_fit)
-    straight = fit.sample(seed=2)  # no steps: until converged
-    d = straight.diagnostics
-    assert d.converged and d.stopped_by == "converged" and d.steps >= FIRST_CHECK
-    # stopped by max_steps at the first check, then resumed: the same chain, bit for bit
-    chain = tmp_path / "chain.h5"
-    first = sample_posterior(fit, seed=2, chain_path=chain, max_steps=FIRST_CHECK)
-    assert first.diagnostics.stopped_by == "max_steps" and not first.diagnostics.converged
-    resumed = sample_posterior(fit, chain_path=chain, resume=True)
-    assert resumed.diagnostics.stopped_by == "converged"
-    np.testing.assert_array_equal(resumed.chain, straight.chain)
-    assert read_chain(chain)[0].shape[0] == d.steps
-
-
 @pytest.fixture(scope="module")
 def sampled(default_fit, tmp_path_factory):
     """``idtool sample`` until converged (seed 2) on a copy of the default fit, and its
-    exit code: read by the command-line test and the report test (one converged run of
-    the example on the command line, not two). Read-only: a test that writes copies it."""
+    exit code: the example's one uninterrupted default run, read by the API, command-line
+    and report tests (the API test ran its own before: 6,400 steps of the same chain
+    again). Read-only: a test that writes copies it."""
     folder = tmp_path_factory.mktemp("sampled") / "fit"
     shutil.copytree(default_fit, folder)
     code = main(["sample", str(folder), "--seed", "2", "--no-progress", "-q", "--force"])
     return folder, code
+
+
+def test_a_default_sample_of_a_default_fit_converges(default_fit, sampled, tmp_path):
+    """One default run converges (the command line's, ``Fit.sample`` underneath); the
+    API stopped by ``max_steps`` at the first check and resumed continues the same
+    chain, bit for bit, to the same stop."""
+    folder, code = sampled
+    assert code == 0
+    straight = json.loads((folder / "sample.json").read_text())["diagnostics"]
+    assert straight["converged"] and straight["stopped_by"] == "converged"
+    straight_chain = read_chain(folder / "chain.h5")[0]
+    assert straight_chain.shape[0] == straight["steps"] >= FIRST_CHECK
+    fit = idtool.load_fit(default_fit)
+    chain = tmp_path / "chain.h5"
+    first = sample_posterior(fit, seed=2, chain_path=chain, max_steps=FIRST_CHECK)
+    assert first.diagnostics.stopped_by == "max_steps" and not first.diagnostics.converged
+    resumed = sample_posterior(fit, chain_path=chain, resume=True)
+    d = resumed.diagnostics
+    assert d.converged and d.stopped_by == "converged" and d.steps == straight["steps"]
+    np.testing.assert_array_equal(read_chain(chain)[0], straight_chain)
+    assert resumed.chain.shape == straight_chain.shape
 
 
 def test_the_command_line_samples_until_converged_and_records_the_rule(sampled, tmp_path):
