@@ -118,6 +118,11 @@ class Fit:
         return self.artefact.chosen.phi
 
     @property
+    def noise_state(self) -> np.ndarray:
+        """The noise model's correlation state (``NOISE_MODELS``; AR(1): ``[phi]``)."""
+        return self.artefact.chosen.noise_state
+
+    @property
     def sigma_n(self) -> float:
         return self.artefact.chosen.sigma_n
 
@@ -340,7 +345,7 @@ class Fit:
             held = select_traces(dataset, [f"!{i}" for i in sorted(fitted)] or ["*"])
         reused = sorted(fitted & {t.id for t in held.traces})
         draws = self.draws(max_draws, seed)
-        out = validate(self.model, self.z, self.phi, draws, held)
+        out = validate(self.model, self.z, self.noise_state, draws, held)
         if reused:
             note = f"not held out: {', '.join(reused)} were fitted"
             out = dataclasses.replace(out, warnings=(*out.warnings, note))

@@ -78,6 +78,7 @@ CALLS = {
     "z": lambda f, other, root: f.z,
     "cov_z": lambda f, other, root: f.cov_z,
     "phi": lambda f, other, root: f.phi,
+    "noise_state": lambda f, other, root: f.noise_state,
     "sigma_n": lambda f, other, root: f.sigma_n,
     "seconds": lambda f, other, root: f.seconds,
     "levels": lambda f, other, root: f.levels,

@@ -59,17 +59,24 @@ class LawFit:
     """One coupling law's fit, what predictions and the sampler need of it: its model,
     optimum ``z`` (internal scale, all parameters), covariance ``cov_z`` (in blocks, or
     dense from a folder written before them: :mod:`idtool._fit._cov`), noise
-    parameters ``phi`` and ``sigma_n`` [N], and the levels model's sd grids (name ->
+    parameters ``noise_state`` (the noise model's correlation state) and ``sigma_n``
+    [N], and the levels model's sd grids (name ->
     (sd values, posterior probabilities)) and state (free levels, sds), or none."""
 
     spec: ModelSpec
     model: BenchModel = dataclasses.field(repr=False)
     z: np.ndarray
     cov_z: Covariance = dataclasses.field(repr=False)
-    phi: float
+    noise_state: np.ndarray
     sigma_n: float
     sd_grids: SdGrids = dataclasses.field(default_factory=dict, repr=False)
     levels: Levels | None = dataclasses.field(default=None, repr=False)
+
+    @property
+    def phi(self) -> float:
+        """The AR(1) coefficient: the state's ``phi`` (0 for a model without one), as
+        ``fit.json``'s ``noise.phi`` has always recorded it."""
+        return self.model.noise.state_by_name(self.noise_state).get("phi", 0.0)
 
     @property
     def conditioning(self) -> Conditioning | None:
@@ -136,16 +143,17 @@ class FitArtefact:
 
 
 def state_arrays(result: FitResult) -> dict[str, np.ndarray]:
-    """A fit's internal state as ``fit_state*.npz`` holds it: the vector ``z`` and its
-    covariance (in blocks, :func:`~idtool._fit._cov.covariance_state`), ``phi``,
-    ``sigma_n`` [N], the parameter names, the multi-start's optima (``optima_rss``
-    [N^2], ``optima_z``: their physical blocks, internal scale) and the levels model's
-    sd grids and state."""
+    """A fit's internal state as ``fit_state*.npz`` holds it: the vector ``z`` and its covariance
+    (in blocks, :func:`~idtool._fit._cov.covariance_state`), ``phi`` and the noise's
+    correlation state ``noise_state``, ``sigma_n`` [N], the parameter names, the
+    multi-start's optima (``optima_rss`` [N^2], ``optima_z``: their physical blocks,
+    internal scale) and the levels model's sd grids and state."""
     k = result.model.n_physical
     arrays: dict[str, np.ndarray] = {
         "z": np.asarray(result.z),
         **covariance_state(result.cov_z),  # its blocks (since issue 28: never (p, p))
         "phi": np.array(result.phi),
+        "noise_state": np.asarray(result.noise_state, float),
         "sigma_n": np.array(result.sigma_n),
         "names": np.array(result.model.names),
         "optima_rss": np.array([float(o["rss"]) for o in result.optima], float),
@@ -186,6 +194,14 @@ def _cov_parts(state: Mapping[str, np.ndarray]) -> LevelCovariance | None:
     return LevelCovariance(block, np.asarray(state["levels_cov_low"]), disc, measured)
 
 
+def _noise_state(model: BenchModel, state: Mapping[str, np.ndarray]) -> np.ndarray:
+    """The noise's correlation state as saved; a folder from before the state kept
+    ``phi`` alone (then the only state a noise model had)."""
+    if "noise_state" in state:
+        return np.asarray(state["noise_state"], float)
+    return model.noise.state_from_names({"phi": float(state["phi"])})
+
+
 def _law_fit(spec: ModelSpec, data: FitData, state: Mapping[str, np.ndarray], where: str) -> LawFit:
     """The :class:`LawFit` of ``spec`` from its state arrays (``where``: for errors)."""
     model = spec.build(data)
@@ -213,7 +229,7 @@ def _law_fit(spec: ModelSpec, data: FitData, state: Mapping[str, np.ndarray], wh
         model=model,
         z=np.asarray(state["z"]),
         cov_z=covariance_from_state(state, model.n_shared),
-        phi=float(state["phi"]),
+        noise_state=_noise_state(model, state),
         sigma_n=float(state["sigma_n"]),
         sd_grids={
             key.split(":", 1)[1]: (np.asarray(v[0]), np.asarray(v[1]))

@@ -4,7 +4,7 @@ Without ``rig.transducer`` the sdof coupling (:mod:`idtool._model._coupling_sdof
 the horn as driven at its resonance, ``D = 0``. Whether the traces could tell otherwise
 is a question for the likelihood: the chosen fit is refitted with ``D`` held on a grid
 of fixed values, every other parameter free (the gain takes up the drive's magnitude),
-same AR(1) ``phi``, each point warm-started from its neighbour's optimum, as
+same noise state (AR(1): ``phi``), each point warm-started from its neighbour's optimum, as
 :func:`idtool._fit._intervals.profile_parameter` does. The rise of ``-2 log L`` over
 the best point is the profile; its 95% interval is where the rise stays below 3.84,
 interpolated linearly between grid points (so no finer than the grid).
@@ -109,7 +109,7 @@ def detuning_profile(result: FitResult, grid_n_m=GRID_N_M) -> tuple[Profile, np.
             outs = []
             for start in (z.copy(), loaded.copy()):
                 start[i] = spec.internal(float(values[j]))
-                outs.append(run_lm(free, start, mask, result.phi, 100))
+                outs.append(run_lm(free, start, mask, result.noise_state, 100))
             best = min(outs, key=lambda o: float(o.loss))
             delta[j] = (2.0 * float(best.loss) - result.rss) / sigma2
             z = at[j] = np.asarray(best.z)

@@ -1,5 +1,5 @@
 """Joint least-squares fit of a dataset: multi-start Levenberg-Marquardt with a coloured
-Jacobian (:mod:`idtool._fit._lm`), AR(1) noise, Gauss-Newton covariance and identifiability
+Jacobian (:mod:`idtool._fit._lm`), correlated noise, Gauss-Newton covariance and identifiability
 checks.
 
 Procedure (one friction law, one coupling law):
@@ -11,10 +11,12 @@ Procedure (one friction law, one coupling law):
    budget. Joint end points rank basins by their real loss (held nuisances let a
    spurious low-Kt basin win on two-load designs), and with the coloured Jacobian a
    step costs the same whichever parameters move. Distinct optima are summarised.
-3. The lowest end point is taken to convergence. The lag-1 autocorrelation ``phi`` of
-   the block residuals is estimated and the fit repeated on AR(1)-whitened residuals
-   until ``phi`` settles: load-cell noise is correlated, and treating it as
-   independent would make every interval too narrow.
+3. The lowest end point is taken to convergence. The noise model's correlation state
+   (AR(1), the default: the lag-1 autocorrelation ``phi`` of the block residuals) is
+   estimated from the residuals and the fit repeated on residuals whitened with it
+   until it settles (:meth:`~idtool._model._noise.AbstractNoise.estimate_state`):
+   load-cell noise is correlated, and treating it as independent would make every
+   interval too narrow.
 4. Covariance ``sigma^2 (J^T J)^-1`` of the whitened problem, on the internal scale;
    95% intervals are mapped through the transforms (so they respect the bounds).
 """
@@ -26,6 +28,7 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from idtool._data._blocks import FitData
@@ -59,13 +62,14 @@ _POLISH_STEPS = 100
 _DECREMENT_AT_OPTIMUM = 1e-2
 
 
-def _loglik(w: np.ndarray, phi: float, n_traces: int) -> tuple[float, float]:
-    """Exact Gaussian AR(1) log-likelihood at the MLE of sigma; and that sigma."""
+def _loglik(w: np.ndarray, log_det: float, n_traces: int) -> tuple[float, float]:
+    """Exact Gaussian log-likelihood of whitened residuals ``w`` at the MLE of sigma,
+    ``log_det`` the whitening's ``log |det L|`` per trace
+    (:meth:`~idtool._model._noise.AbstractNoise.trace_log_det`; AR(1):
+    ``0.5 log(1 - phi^2)``); and that sigma [N]."""
     n = w.size
     s2 = float(np.sum(w**2) / n)
-    return -0.5 * n * (math.log(2 * math.pi * s2) + 1) + 0.5 * n_traces * math.log(
-        1 - phi**2
-    ), math.sqrt(s2)
+    return -0.5 * n * (math.log(2 * math.pi * s2) + 1) + n_traces * log_det, math.sqrt(s2)
 
 
 def _distinct(points: list[dict], rel: float = 1e-6, near: float = 0.05) -> list[dict]:
@@ -179,8 +183,8 @@ def fit_model(
     count = {"steps": 0, "jacobians": 0}
     counting = threading.Lock()
 
-    def run(z, mask, phi, max_steps):
-        out = run_lm(model, np.asarray(z, float), mask, phi, max_steps)
+    def run(z, mask, state, max_steps):
+        out = run_lm(model, np.asarray(z, float), mask, state, max_steps)
         with counting:  # the multi-start runs in two threads
             count["steps"] += int(out.steps)
             count["jacobians"] += int(out.n_jacobians)
@@ -189,7 +193,7 @@ def fit_model(
     if start_from is not None:
         # its parameters by name (same data: same nuisance centres and scales); the new
         # ones where this model reduces to that one if they say (nested_at), else at
-        # their start values; the AR(1) coefficient where it ended
+        # their start values; the noise's state where it ended
         prev = start_from.model.names
         z = np.array(
             [
@@ -208,10 +212,11 @@ def fit_model(
                 for zz, value in zip(zs, values, strict=True):
                     zz[i] = p.internal(value)
         fits = []
-        for zz in zs:  # ranked by likelihood: each settles its own phi
-            best = run(zz, everything, start_from.phi, _POLISH_STEPS)
-            best, phi = _settle_phi(model, best, start_from.phi, run)
-            fits.append(_summarise(model, best, phi, start_from.optima, count))
+        state = _carried_state(model, start_from)
+        for zz in zs:  # ranked by likelihood: each settles its own state
+            best = run(zz, everything, state, _POLISH_STEPS)
+            best, settled = _settle_state(model, best, state, run)
+            fits.append(_summarise(model, best, settled, start_from.optima, count))
         return max(fits, key=lambda f: f.loglik)
 
     # 2. multi-start: from each quasi-random point of the physical parameters (the
@@ -238,7 +243,8 @@ def fit_model(
     # and the starts are independent (same end points in any order; 0.58 s against
     # 0.68 s for the example's 8 starts on 2 cores)
     with ThreadPoolExecutor(2) as pool:
-        ends = list(pool.map(lambda z: run(z, everything, 0.0, _MULTISTART_STEPS), zs))
+        white = model.noise.initial_state()
+        ends = list(pool.map(lambda z: run(z, everything, white, _MULTISTART_STEPS), zs))
     for start, out in zip(starts, ends, strict=True):
         points.append(
             {
@@ -253,27 +259,37 @@ def fit_model(
     # 3. the lowest end point, taken to convergence
     best = min(ends, key=lambda o: float(o.loss))
     if not bool(best.converged):
-        best = run(best.z, everything, 0.0, _POLISH_STEPS)
+        best = run(best.z, everything, model.noise.initial_state(), _POLISH_STEPS)
 
-    best, phi = _settle_phi(model, best, 0.0, run)
-    return _summarise(model, best, phi, optima, count)
+    best, state = _settle_state(model, best, model.noise.initial_state(), run)
+    return _summarise(model, best, state, optima, count)
 
 
-def _settle_phi(model: BenchModel, best: LMResult, phi: float, run) -> tuple[LMResult, float]:
-    """Refit on AR(1)-whitened residuals (autoregressive noise) until phi settles, from
-    ``best`` fitted with ``phi``; the last fit and the phi it was fitted with."""
+def _carried_state(model: BenchModel, start_from: FitResult) -> np.ndarray:
+    """The noise state to start a refit from: the previous fit's, by parameter name
+    (uncorrelated in a coefficient it did not have)."""
+    previous = start_from.model.noise.state_by_name(start_from.noise_state)
+    return model.noise.state_from_names(previous)
+
+
+def _settle_state(
+    model: BenchModel, best: LMResult, state: np.ndarray, run
+) -> tuple[LMResult, np.ndarray]:
+    """Refit on whitened residuals (correlated noise) until the noise model's state
+    settles (:meth:`~idtool._model._noise.AbstractNoise.state_settled`), from ``best``
+    fitted with ``state``; the last fit and the state it was fitted with."""
     data = model.data
     everything = np.ones(best.z.size, bool)
     for _ in range(3 if model.noise.autoregressive else 0):
-        e = unwhiten(np.asarray(best.residuals), phi, data)
-        new_phi = model.noise.estimate_phi(e, data.first)
-        # Stop once phi settles (the estimates then move far less than their errors);
-        # phi stays the one the parameters were fitted with.
-        if abs(new_phi - phi) < 0.02:
+        e = unwhiten(np.asarray(best.residuals), state, model)
+        new = model.noise.estimate_state(e, data.first)
+        # Stop once the state settles (the estimates then move far less than their
+        # errors); it stays the one the parameters were fitted with.
+        if model.noise.state_settled(state, new):
             break
-        phi = new_phi
-        best = run(best.z, everything, phi, _POLISH_STEPS)
-    return best, phi
+        state = new
+        best = run(best.z, everything, state, _POLISH_STEPS)
+    return best, state
 
 
 def _values_and_jacobian(
@@ -297,7 +313,11 @@ def _values_and_jacobian(
 
 
 def _summarise(
-    model: BenchModel, best: LMResult, phi: float, optima: list[dict], count: dict[str, int]
+    model: BenchModel,
+    best: LMResult,
+    state: np.ndarray,
+    optima: list[dict],
+    count: dict[str, int],
 ) -> FitResult:
     data = model.data
     z = np.asarray(best.z)
@@ -407,12 +427,13 @@ def _summarise(
     offs = len(specs)
     fr = vals[offs : offs + data.n_traces]
     fr_se = se_vals[offs : offs + data.n_traces]
-    loglik, sigma = _loglik(w, phi, data.n_traces)
+    log_det = float(model.noise.trace_log_det(jnp.asarray(state)))
+    loglik, sigma = _loglik(w, log_det, data.n_traces)
     return FitResult(
         model=model,
         z=z,
         cov_z=cov,
-        phi=phi,
+        noise_state=np.asarray(state, float),
         sigma_n=sigma,
         rss=rss,
         loglik=loglik,

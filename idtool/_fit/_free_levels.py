@@ -44,9 +44,8 @@ MIN_AT_LEVEL_S = 0.15
 # 176 and 294 N). Held below it, the model's value moves the OFF level by at most
 # sqrt(1e-3) = 3% of the value's error.
 INFORMED_ON = 1e-3
-# The free levels' own AR(1) coefficient replaces the fit's when they differ by this much
-# (the fit's own refits stop at the same change, idtool._fit._fit._settle_phi).
-PHI_SETTLED = 0.02
+# The free levels' own noise state replaces the fit's when they differ as much as the
+# fit's own refits would go on for (AbstractNoise.state_settled, idtool._fit._fit).
 
 
 @dataclasses.dataclass(frozen=True)
@@ -128,19 +127,20 @@ def _at_level_s(model: BenchModel, z: np.ndarray, levels: np.ndarray) -> np.ndar
     return length - settle
 
 
-def _linearise(model: BenchModel, z: np.ndarray, phi: float):
+def _linearise(model: BenchModel, z: np.ndarray, state):
     """The fit's own linearisation at ``z`` (no new program to compile): the whitened
     residuals, the levels ``(OFF, ON)``, their Jacobian in the physical parameters and
     each trace's blocks of the normal equations in ``u = (OFF, ON, z[k:])`` (colours:
     the shared bench parameters, the trace's OFF and ON levels, its nuisances;
     :func:`~idtool._fit._program.bench_normal_equations`)."""
-    out = run_lm(model, np.asarray(z, float), np.ones(z.size, bool), phi, 0)
+    out = run_lm(model, np.asarray(z, float), np.ones(z.size, bool), state, 0)
     lv, dlv, cc, cr = (np.asarray(x) for x in out.aux)
     return np.asarray(out.residuals), lv, dlv, cc, cr
 
 
-def free_levels(model: BenchModel, z: np.ndarray, phi: float) -> FreeLevels:
-    """The traces' own levels, from the fit ``z`` (module docstring).
+def free_levels(model: BenchModel, z: np.ndarray, state) -> FreeLevels:
+    """The traces' own levels, from the fit ``z`` and its noise ``state`` (the noise
+    model's correlation state, :mod:`idtool._model._noise`; module docstring).
 
     One Gauss-Newton step in ``u`` from the fit's optimum: the block means are linear
     in the levels wherever the force sits at them, so the step lands on the free
@@ -148,28 +148,30 @@ def free_levels(model: BenchModel, z: np.ndarray, phi: float) -> FreeLevels:
     run to convergence in ``u`` moved the free FRs by ~1e-4, a twentieth of their
     standard errors; measured while this was written, not a test).
 
-    The AR(1) coefficient is the free levels' own, from their residuals (like the noise
-    sd): the fit's ``phi`` comes from residuals that hold its model's misfit of the
+    The noise state (AR(1): phi) is the free levels' own, from their residuals (like the
+    noise sd): the fit's ``phi`` comes from residuals that hold its model's misfit of the
     levels, which it reads as slow noise. On the departure bench "all" (a coupling law
     the fit does not ship) the fit's phi was 0.97 and the free levels' 0.75 (residuals
     1.8 N rms against 0.47 N): at 0.97 the OFF levels' standard errors came out 1.8x
     their errors' spread and the scatter of mu half its truth, below its interval.
     """
     z = np.asarray(z, float)
-    free, u = _free_step(model, z, phi)
-    if model.noise.autoregressive:
-        e = np.asarray(_level_residuals(model, jnp.asarray(u), jnp.asarray(z), 0.0))
-        own = model.noise.estimate_phi(e, np.asarray(model.data.first))
-        if abs(own - phi) >= PHI_SETTLED:
+    free, u = _free_step(model, z, state)
+    noise = model.noise
+    if noise.autoregressive:
+        white = noise.initial_state()
+        e = np.asarray(_level_residuals(model, jnp.asarray(u), jnp.asarray(z), white))
+        own = noise.estimate_state(e, np.asarray(model.data.first))
+        if not noise.state_settled(state, own):
             free, _ = _free_step(model, z, own)
     return free
 
 
 @program()
-def _level_residuals(model: BenchModel, u, z, phi):
+def _level_residuals(model: BenchModel, u, z, state):
     """:meth:`BenchModel.level_residuals` as one program: run op by op it compiled (or
     loaded from the cache) ~100 one-operation programs, ~0.4 s of a warm fit."""
-    return model.level_residuals(u, z, phi)
+    return model.level_residuals(u, z, state)
 
 
 def _u_layout(model: BenchModel) -> tuple[np.ndarray, np.ndarray]:
@@ -180,8 +182,8 @@ def _u_layout(model: BenchModel) -> tuple[np.ndarray, np.ndarray]:
     return np.flatnonzero(group < 0), own
 
 
-def _free_step(model: BenchModel, z: np.ndarray, phi: float) -> tuple[FreeLevels, np.ndarray]:
-    """:func:`free_levels` at a given ``phi``, and ``u`` at the free optimum.
+def _free_step(model: BenchModel, z: np.ndarray, state) -> tuple[FreeLevels, np.ndarray]:
+    """:func:`free_levels` at a given noise ``state``, and ``u`` at the free optimum.
 
     The normal equations in ``u`` are an arrowhead (the shared bench parameters, then
     per trace its levels and nuisances): solved through the Schur complement of the
@@ -190,7 +192,7 @@ def _free_step(model: BenchModel, z: np.ndarray, phi: float) -> tuple[FreeLevels
     (:mod:`idtool._fit._level_cov`): linear in the traces, where the dense (6 traces)^2
     system cost traces^3."""
     k, m = model.n_physical, model.data.n_traces
-    w, lv, _, cc, cr = _linearise(model, z, phi)
+    w, lv, _, cc, cr = _linearise(model, z, state)
     shared, own = _u_layout(model)
     sb = shared.size
     measured = _at_level_s(model, z, lv) >= MIN_AT_LEVEL_S
@@ -247,10 +249,10 @@ def _free_step(model: BenchModel, z: np.ndarray, phi: float) -> tuple[FreeLevels
     ), u
 
 
-def model_log_levels(model: BenchModel, z: np.ndarray, phi: float):
+def model_log_levels(model: BenchModel, z: np.ndarray, state):
     """log OFF and log FR per trace at ``z`` and their Jacobian in the physical
     parameters: (2 traces,), (2 traces, k)."""
-    _, lv, dlv, _, _ = _linearise(model, z, phi)
+    _, lv, dlv, _, _ = _linearise(model, z, state)
     m = lv.size // 2
     off, on = lv[:m], lv[m:]
     g = np.concatenate([np.log(off), np.log(on / off)])

@@ -47,7 +47,7 @@ REFIT_TOL = 1e-2
 def refit_with_fixed(
     result: FitResult, i: int, zi: float, z_start=None
 ) -> tuple[float, np.ndarray]:
-    """Refit every parameter but ``i`` (held at ``zi``, internal scale), same AR(1) phi.
+    """Refit every parameter but ``i`` (held at ``zi``, internal scale), same noise state.
 
     Starts from ``z_start`` (default: the optimum) moved along the Gauss-Newton profile
     path (:func:`profile_start`). Returns the rise of ``-2 log L`` over the optimum,
@@ -57,7 +57,7 @@ def refit_with_fixed(
     z = profile_start(result, i, zi, z_start)
     mask = np.ones(z.size, bool)
     mask[i] = False
-    out = run_lm(result.model, z, mask, result.phi, 100, REFIT_TOL)
+    out = run_lm(result.model, z, mask, result.noise_state, 100, REFIT_TOL)
     sigma2 = result.rss / (result.n_data - result.z.size)
     return (2.0 * float(out.loss) - result.rss) / sigma2, np.asarray(out.z)
 

@@ -248,7 +248,7 @@ def modelled_drift(result: FitResult) -> ModelledDrift | None:
     v = model.values(np.asarray(result.z, float))
     if "on_rise" in v:  # relaxing: the traces whose ON level is measured
         z = np.asarray(result.z, float)
-        levels = np.asarray(run_lm(model, z, np.ones(z.size, bool), result.phi, 0).aux[0])
+        levels = np.asarray(run_lm(model, z, np.ones(z.size, bool), result.noise_state, 0).aux[0])
         measured = _at_level_s(model, z, levels) >= MIN_AT_LEVEL_S
         rise = np.asarray(v["on_rise"], float)[measured if measured.any() else slice(None)]
         tau = result.estimates["on_relax_time_s"]
@@ -376,8 +376,8 @@ def plateau_drift(result: FitResult) -> dict[str, PlateauDrift | LevelCreep]:
     d = model.data
     z = np.asarray(result.z, float)
     # the fit's own program run for no step: whitened residuals (model - data) and levels
-    fitted = run_lm(model, z, np.ones(z.size, bool), result.phi, 0)
-    r = -unwhiten(np.asarray(fitted.residuals), result.phi, d)  # data - model [N]
+    fitted = run_lm(model, z, np.ones(z.size, bool), result.noise_state, 0)
+    r = -unwhiten(np.asarray(fitted.residuals), result.noise_state, model)  # data - model [N]
     out = np.asarray(fitted.aux[0])
     times = np.asarray(d.block_time_s)
     block_trace = np.asarray(d.block_trace)

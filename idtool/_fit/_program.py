@@ -1,5 +1,5 @@
 """The one compiled Levenberg-Marquardt program every step of a fit runs: each start,
-polish, AR(1) round, interval check and profile point, of every dataset of about the
+polish, noise-state round, interval check and profile point, of every dataset of about the
 same length and the same laws (its blocks padded to a bucketed count), and the figures'
 prediction at the optimum (the program run for no step); and the bench model's normal
 equations it solves (:func:`bench_normal_equations`): how the fit linearises the model,
@@ -8,15 +8,13 @@ a concern of the solver's, not of the model (:mod:`idtool._model._benchmodel`).
 
 from __future__ import annotations
 
-import math
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from idtool._data._blocks import FitData, padded_size
+from idtool._data._blocks import padded_size
 from idtool._fit._arrow import Arrow, DenseNormal
 from idtool._fit._compiled import program
 from idtool._fit._lm import (
@@ -59,14 +57,15 @@ def level_structure(model: BenchModel, dense: bool = False) -> ColouredJacobian:
 
 
 def bench_normal_equations(
-    model: BenchModel, structure: ColouredJacobian, z: Float[Array, " p"], phi: float | Array
+    model: BenchModel, structure: ColouredJacobian, z: Float[Array, " p"], state: Array | float
 ) -> tuple[Array, Arrow | DenseNormal, tuple[Array, Array, Array, Array]]:
-    """Whitened residuals ``r`` and the normal equations ``J^T J``, ``J^T r`` of
-    ``model`` at ``z`` in arrowhead blocks (:class:`~idtool._fit._arrow.Arrow`: the
-    shared parameters, then each trace's nuisances); and the levels ``(OFF, ON)`` [N]
-    (2 n_traces) with their Jacobian in the physical parameters, and each trace's
-    blocks of the normal equations in ``u`` (below; :func:`u_normal_equations`), which
-    the levels model reads.
+    """Whitened residuals ``r`` (the noise model's whitening at its correlation ``state``,
+    :meth:`~idtool._model._noise.AbstractNoise.whiten`) and the normal equations ``J^T J``,
+    ``J^T r`` of ``model`` at ``z`` in arrowhead blocks (:class:`~idtool._fit._arrow.Arrow`:
+    the shared parameters, then each trace's nuisances); and the levels ``(OFF, ON)`` [N] (2
+    n_traces) with their Jacobian in the physical parameters, and each trace's blocks of the
+    normal equations in ``u`` (below; :func:`u_normal_equations`), which the levels model
+    reads.
 
     The physical parameters reach the traces only through the per-trace OFF and ON
     levels, so the Jacobian is taken in the bench model's inputs ``u = (OFF, ON,
@@ -86,7 +85,7 @@ def bench_normal_equations(
         return jnp.concatenate([off, on])
 
     def resid(u):
-        return model.level_residuals(u, z, phi)
+        return model.level_residuals(u, z, state)
 
     # (2 m, k) and (2 m,): the Jacobian and, from the same pass, the levels
     dlv, lv = jax.jacfwd(lambda zp: (levels(zp),) * 2, has_aux=True)(z[:k])
@@ -131,26 +130,28 @@ def u_normal_equations(
 
 @program(compiler_options=_COMPILE)
 def lm_program(
-    model: BenchModel, structure: ColouredJacobian, z0, mask, phi, max_steps, tol
+    model: BenchModel, structure: ColouredJacobian, z0, mask, state, max_steps, tol
 ) -> LMResult:
     """The compiled program of :func:`run_lm` (its model already padded, ``structure``
     its :func:`level_structure`)."""
     equations = jax.tree_util.Partial(bench_normal_equations, model, structure)
-    return levenberg_marquardt(equations, z0, phi, mask, max_steps, tol)
+    return levenberg_marquardt(equations, z0, state, mask, max_steps, tol)
 
 
-def run_lm(model: BenchModel, z0, mask, phi, max_steps, tol: float = LM_TOL) -> LMResult:
-    """Levenberg-Marquardt on the AR(1)-whitened residuals of ``model``
+def run_lm(model: BenchModel, z0, mask, state, max_steps, tol: float = LM_TOL) -> LMResult:
+    """Levenberg-Marquardt on the residuals of ``model`` whitened at the noise model's
+    correlation ``state`` (an array of the model's length, so that every state value
+    runs the same program; for AR(1) ``[phi]``, a bare number is taken as phi)
     (:func:`bench_normal_equations`) over the parameters in ``mask``, returning
     them with the per-trace levels; ``tol``: the convergence threshold on the
     Gauss-Newton decrement, in residual variances (:func:`levenberg_marquardt`). The
     model is an argument, not a constant, and its blocks are padded to
     :func:`~idtool._data._blocks.padded_size` (residuals 0 there, cut off again here):
-    one compiled program serves every start, polish, AR(1) round, profile point,
+    one compiled program serves every start, polish, noise-state round, profile point,
     tolerance and every dataset of about the same length and the same laws."""
     n = model.data.force_n.shape[0]
     padded = _padded(model)
-    out = lm_program(padded, level_structure(padded), z0, mask, phi, max_steps, float(tol))
+    out = lm_program(padded, level_structure(padded), z0, mask, state, max_steps, float(tol))
     # cut in NumPy: a JAX slice would be one more program to compile for every n
     return eqx.tree_at(lambda o: o.residuals, out, np.asarray(out.residuals)[:n])
 
@@ -161,7 +162,8 @@ def lm_arguments(model: BenchModel) -> tuple:
     :class:`~idtool._fit._prefetch.CompileAhead`)."""
     z = np.asarray(model.z0(), float)
     padded = _padded(model)
-    return (padded, level_structure(padded), z, np.ones(z.size, bool), 0.0, 0, LM_TOL)
+    state = model.noise.initial_state()
+    return (padded, level_structure(padded), z, np.ones(z.size, bool), state, 0, LM_TOL)
 
 
 def _padded(model: BenchModel) -> BenchModel:
@@ -169,23 +171,18 @@ def _padded(model: BenchModel) -> BenchModel:
     return model.padded(padded_size(model.data.force_n.shape[0]))
 
 
-def prediction_at(model: BenchModel, z: np.ndarray, phi: float) -> tuple[np.ndarray, np.ndarray]:
-    """The model's block means [N] at ``z`` and their AR(1)-whitened residuals, from the
+def prediction_at(model: BenchModel, z: np.ndarray, state) -> tuple[np.ndarray, np.ndarray]:
+    """The model's block means [N] at ``z`` and their residuals whitened at the noise
+    ``state`` (:func:`run_lm`), from the
     fit's own compiled program run for no step (no program of their own to trace,
     compile or load: 0.4 s of a repeated fit's figures)."""
-    out = run_lm(model, np.asarray(z, float), np.ones(np.size(z), bool), phi, 0)
+    out = run_lm(model, np.asarray(z, float), np.ones(np.size(z), bool), state, 0)
     w = np.asarray(out.residuals)
-    return np.asarray(model.data.force_n) + unwhiten(w, phi, model.data), w
+    return np.asarray(model.data.force_n) + unwhiten(w, state, model), w
 
 
-def unwhiten(w: np.ndarray, phi: float, data: FitData) -> np.ndarray:
-    """Residuals ``e`` from AR(1)-whitened ones (inverse of BenchModel.residuals'
-    whitening): ``e_1 = w_1 / sqrt(1 - phi^2)``, ``e_t = w_t + phi e_(t-1)``."""
-    e = np.array(w, float)
-    first = np.asarray(data.first)
-    for t in range(e.size):
-        if first[t]:
-            e[t] = w[t] / math.sqrt(1.0 - phi**2)
-        else:
-            e[t] = w[t] + phi * e[t - 1]
-    return e
+def unwhiten(w: np.ndarray, state, model: BenchModel) -> np.ndarray:
+    """Residuals ``e`` [N] from whitened ones (the inverse of
+    :meth:`~idtool._model._benchmodel.BenchModel.residuals`' whitening by ``model``'s
+    noise model at ``state``)."""
+    return model.noise.unwhiten(w, np.asarray(model.data.first), state)

@@ -112,7 +112,8 @@ class FitResult:
     # the covariance of z, in the arrowhead's blocks (idtool._fit._cov; (p, p) only
     # for the dense reference path)
     cov_z: Covariance
-    phi: float
+    # the noise model's correlation state (AbstractNoise.state_params; AR(1): [phi])
+    noise_state: np.ndarray
     sigma_n: float
     rss: float
     loglik: float
@@ -131,6 +132,12 @@ class FitResult:
     # the levels' trends within their plateaus by kind ("ON", "OFF"), when diagnosed
     # (:mod:`idtool._fit._plateau_drift`)
     plateau_drift: dict[str, Any] | None = None
+
+    @property
+    def phi(self) -> float:
+        """The AR(1) coefficient: the state's ``phi`` (0 for a model without one), as
+        ``fit.json``'s ``noise.phi`` has always recorded it."""
+        return self.model.noise.state_by_name(self.noise_state).get("phi", 0.0)
 
     @property
     def sd_grids(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -158,7 +165,7 @@ class FitResult:
 
     @property
     def n_params(self) -> int:
-        return int(self.z.size) + len(self.model.noise.params)  # + sigma (and phi)
+        return int(self.z.size) + len(self.model.noise.params)  # + sigma (and the state)
 
     @property
     def aic(self) -> float:

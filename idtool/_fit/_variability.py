@@ -174,7 +174,7 @@ def _gls_form(parts: LevelCovariance, tau2: np.ndarray):
     return form
 
 
-def _line_search(model, z, phi, y, rows, form, theta, step, r, at_theta):
+def _line_search(model, z, state, y, rows, form, theta, step, r, at_theta):
     """``theta`` moved along the Gauss-Newton ``step``, halved until the generalised
     residual sum of squares ``r' C^-1 r`` does not rise (at most 30 halvings: then no
     move); returns the new ``theta``, the step taken and the model's log levels and
@@ -192,7 +192,7 @@ def _line_search(model, z, phi, y, rows, form, theta, step, r, at_theta):
     for _ in range(31):
         trial = theta + step
         with np.errstate(divide="ignore", invalid="ignore"):  # a level at zero: rejected
-            levels = model_log_levels(model, np.concatenate([trial, z[k:]]), phi)
+            levels = model_log_levels(model, np.concatenate([trial, z[k:]]), state)
         g_all = levels[0]
         if np.all(np.isfinite(g_all)) and gls(y - g_all[rows]) <= before * (1.0 + 1e-12):
             return trial, step, levels
@@ -200,10 +200,11 @@ def _line_search(model, z, phi, y, rows, form, theta, step, r, at_theta):
     return theta, np.zeros_like(step), at_theta
 
 
-def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variability:
-    """Stages 1 and 2 (module docstring) from a converged fit's ``z`` and AR(1) ``phi``."""
+def estimate_variability(model: BenchModel, z: np.ndarray, state) -> Variability:
+    """Stages 1 and 2 (module docstring) from a converged fit's ``z`` and noise
+    ``state`` (its noise model's correlation state; AR(1): ``[phi]``)."""
     k = model.n_physical
-    free = free_levels(model, np.asarray(z), phi)
+    free = free_levels(model, np.asarray(z), state)
     design = level_design(model, free.measured)
     if not design.active[2]:
         raise NoMeasuredLevels("no trace's ON window is long enough to measure its ON level")
@@ -218,7 +219,7 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
     z = np.asarray(z, float)
     theta = z[:k].copy()
     s = np.log(np.full(3, 0.01))
-    levels = model_log_levels(model, np.concatenate([theta, z[k:]]), phi)
+    levels = model_log_levels(model, np.concatenate([theta, z[k:]]), state)
     for _ in range(12):
         g_all, jac_all = levels
         r, g = free.y - g_all[rows], jac_all[rows]
@@ -229,7 +230,7 @@ def estimate_variability(model: BenchModel, z: np.ndarray, phi: float) -> Variab
         _, step = at_sds(tau2, r2, g2, args)
         form = _gls_form(parts, tau2)
         theta, step, levels = _line_search(
-            model, z, phi, free.y, rows, form, theta, step, r, levels
+            model, z, state, free.y, rows, form, theta, step, r, levels
         )
         cov = np.linalg.inv(form(r, g)[1])
         if not np.all(np.diag(cov) > 0.0):

@@ -24,7 +24,7 @@ def compile_variability(result: FitResult) -> None:
     """Compile the levels model's programs for ``result``'s traces (their shapes: how
     many ON levels are measured), for :func:`estimate_variability` to find compiled;
     run in :class:`~idtool._fit._prefetch.CompileAhead`'s thread."""
-    free = free_levels(result.model, result.z, result.phi)
+    free = free_levels(result.model, result.z, result.noise_state)
     assert free.cov_parts is not None  # a fresh free_levels'
     design = level_design(result.model, free.measured)
     m, k = free.off_n.size, result.model.n_physical
@@ -43,7 +43,7 @@ def with_variability(result: FitResult) -> FitResult:
     model = result.model
     k, m = model.n_physical, model.data.n_traces
     try:
-        v = estimate_variability(model, result.z, result.phi)
+        v = estimate_variability(model, result.z, result.noise_state)
     except (np.linalg.LinAlgError, NoMeasuredLevels) as err:
         why = str(err) or "their covariance is singular"
         note = (
@@ -60,7 +60,7 @@ def with_variability(result: FitResult) -> FitResult:
     estimates = dict(result.estimates)
     for i, spec in enumerate(model.shared_params[:k]):
         estimates[spec.name] = estimate_of(spec, z[i], se_z[i])
-    g, jac = model_log_levels(model, z, result.phi)
+    g, jac = model_log_levels(model, z, result.noise_state)
     fr = np.exp(g[m:])
     # the delta method's variance as a sum of squares over the covariance's eigenvectors:
     # never negative, where the quadratic form j C j' came out -3.7e-4 by round-off when

@@ -24,7 +24,8 @@ Parameters, in the order of the internal vector ``z``:
   switch-off [s]; then the level model's (the relaxing ON level's rise [-]).
 
 Every parameter lives on an unbounded internal scale (:mod:`idtool._model._params`).
-The noise parameters are not in ``z``: the fit estimates phi from its residuals, the
+The noise parameters are not in ``z``: the fit estimates the noise model's correlation
+state (AR(1): phi) from its residuals, the
 sampler adds the noise model's ``params`` after the shared ones.
 """
 
@@ -47,7 +48,7 @@ from idtool._model._coupling import COUPLINGS, AbstractCoupling
 from idtool._model._laws import FRICTION_LAWS, MU, AbstractFrictionLaw
 from idtool._model._level_model import DEFAULT_LEVEL_MODEL, LEVEL_MODELS, AbstractLevelModel
 from idtool._model._names import DEFAULT_COUPLING
-from idtool._model._noise import DEFAULT_NOISE, NOISE_MODELS, AbstractNoise, whiten
+from idtool._model._noise import DEFAULT_NOISE, NOISE_MODELS, AbstractNoise, NoiseState
 from idtool._model._offset import DEFAULT_OFFSET, OFFSETS, AbstractOffset
 from idtool._model._params import Param
 from idtool._model._settings import ParameterSetting, apply_settings, fixed_values
@@ -279,15 +280,17 @@ class BenchModel(eqx.Module):
         off, on, _ = self.levels(v)
         return self.block_means(off, on, v)
 
-    def residuals(self, z: Float[Array, " p"], phi: float | Array = 0.0) -> Array:
-        """AR(1)-whitened residuals (:func:`idtool._model._noise.whiten`) of the model;
-        0 at padded blocks (:meth:`FitData.padded`)."""
+    def residuals(self, z: Float[Array, " p"], state: NoiseState | None = None) -> Array:
+        """Residuals of the model whitened by its noise model at the correlation
+        ``state`` (:meth:`AbstractNoise.whiten`; default: uncorrelated); 0 at padded
+        blocks (:meth:`FitData.padded`)."""
         d = self.data
-        w = whiten(self.predict(z) - d.force_n, jnp.asarray(d.first), phi)
+        at = self.noise.initial_state() if state is None else state
+        w = self.noise.whiten(self.predict(z) - d.force_n, jnp.asarray(d.first), at)
         return w * jnp.asarray(d.block_weight)
 
     def level_residuals(
-        self, u: Float[Array, " q"], z: Float[Array, " p"], phi: float | Array
+        self, u: Float[Array, " q"], z: Float[Array, " p"], state: NoiseState
     ) -> Float[Array, " blocks"]:
         """Whitened residuals with the per-trace levels given: ``u = (OFF, ON, z[k:])``
         ([N], [N], then the bench parameters of ``z``; ``z[:k]`` is not used)."""
@@ -295,7 +298,8 @@ class BenchModel(eqx.Module):
         v = self.values(jnp.concatenate([z[:k], u[2 * m :]]))
         e = self.block_means(u[:m], u[m : 2 * m], v) - self.data.force_n
         # 0 at padded blocks (FitData.padded): no residual, no Jacobian row
-        return whiten(e, jnp.asarray(self.data.first), phi) * jnp.asarray(self.data.block_weight)
+        w = self.noise.whiten(e, jnp.asarray(self.data.first), state)
+        return w * jnp.asarray(self.data.block_weight)
 
 
 def shared_params_of(

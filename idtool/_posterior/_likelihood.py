@@ -32,7 +32,7 @@ from jaxtyping import Array
 
 from idtool._fit._cov import Covariance
 from idtool._model._benchmodel import BenchModel
-from idtool._model._noise import NOISE_MODELS, whiten
+from idtool._model._noise import NOISE_MODELS
 from idtool._model._params import Param
 from idtool._posterior._prior import Prior
 
@@ -63,7 +63,9 @@ class Target(eqx.Module):
     model: BenchModel
     nuisances: dict[str, Array]  # per-trace values (traces,) at the linearisation
     jac_e: Array  # (blocks, groups) d prediction / d nuisance (internal units) there
-    gram: Array  # (3, traces, groups, groups): J_w^T J_w = gram[0] + phi gram[1] + phi^2 gram[2]
+    # (terms, traces, groups, groups): what the noise model precomputes of the whitened
+    # Gram J_w^T J_w (AbstractNoise.gram_terms; AR(1): its 3 terms in 1, phi, phi^2)
+    gram: Array
     continues: Array  # (blocks,) the next block belongs to the same trace
     priors: tuple[Prior, ...] = eqx.field(static=True)
 
@@ -105,17 +107,14 @@ def build_target(
         model=model,
         nuisances={group: jnp.asarray(v[group]) for group, _, _ in model.trace_groups},
         jac_e=jnp.zeros((d.n_blocks, g)),
-        gram=jnp.zeros((3, n, g, g)),
+        gram=jnp.zeros((0, n, g, g)),  # set below, from the Jacobian
         continues=jnp.asarray(continues),
         priors=tuple(priors[p.name] for p in sampled_params(model)),
     )
     shared = {p.name: v[p.name] for p in model.shared_params}
     jac_e = np.asarray(_nuisance_jacobian(shared, target))
-    return eqx.tree_at(
-        lambda t: (t.jac_e, t.gram),
-        target,
-        (jnp.asarray(jac_e), jnp.asarray(_gram(jac_e, first, np.asarray(d.block_trace), n))),
-    )
+    gram = model.noise.gram_terms(jac_e, first, np.asarray(d.block_trace), n)
+    return eqx.tree_at(lambda t: (t.jac_e, t.gram), target, (jnp.asarray(jac_e), jnp.asarray(gram)))
 
 
 @jax.jit
@@ -136,31 +135,6 @@ def _nuisance_jacobian(shared: dict, target: Target) -> Array:
         }
         cols.append(jax.jvp(pred, (primals,), (tangents,))[1])
     return jnp.stack(cols, axis=1)
-
-
-def _gram(jac: np.ndarray, first: np.ndarray, trace: np.ndarray, n_traces: int) -> np.ndarray:
-    """Per trace, the whitened nuisance Gram matrix as a quadratic in phi
-    (3, traces, groups, groups).
-
-    ``(J_t - phi J_{t-1})`` within a trace and ``sqrt(1 - phi^2) J_t`` at its first block,
-    expanded, so the sampler never re-whitens J.
-    """
-    prev = np.roll(jac, 1, axis=0)
-    inner = ~first
-    outer = np.einsum("ti,tj->tij", jac, jac)
-    cross = np.einsum("ti,tj->tij", jac, prev)
-    prev_outer = np.einsum("ti,tj->tij", prev, prev)
-    terms = np.stack(
-        [
-            outer,
-            -np.where(inner[:, None, None], cross + cross.transpose(0, 2, 1), 0.0),
-            np.where(inner[:, None, None], prev_outer, -outer),
-        ]
-    )
-    out = np.zeros((3, n_traces, *jac.shape[1:], jac.shape[1]))
-    for k in range(3):
-        np.add.at(out[k], trace, terms[k])
-    return out
 
 
 def physical_values(theta: Array, target: Target) -> dict[str, Array]:
@@ -200,12 +174,14 @@ def marginal_loglik_batch(e: Array, v: dict, target: Target) -> tuple[Array, Arr
 def trace_logliks_batch(e: Array, v: dict, target: Target) -> tuple[Array, Array]:
     """Each trace's log-likelihood (walkers, traces), the nuisances integrated out, and
     the nuisance shift (walkers, traces, groups). Given the shared parameters the traces
-    are independent (the nuisances and the AR(1) noise are per trace), so these terms
+    are independent (the nuisances and the noise's correlation are per trace), so these terms
     are the exact factorisation of the likelihood: what ``az.loo`` needs per trace.
 
-    With ``w = L e`` the whitened residuals and ``J_w = L J``: ``h = J_w^T w = J^T (L^T w)``
-    and ``J_w^T J_w`` comes precomputed (:func:`_gram`), so a call costs two passes over
-    the blocks (walkers as the fastest axis) and one groups x groups Cholesky per trace.
+    With ``w = L e`` the whitened residuals and ``J_w = L J``, the noise model gives
+    ``h = J_w^T w`` and ``J_w^T J_w`` (:meth:`AbstractNoise.nuisance_equations`; AR(1):
+    ``J^T (L^T w)`` and a Gram precomputed as a quadratic in phi, so a call costs two
+    passes over the blocks, walkers the fastest axis), then one groups x groups
+    Cholesky per trace.
     """
     t = target
     noise = t.model.noise
@@ -216,18 +192,13 @@ def trace_logliks_batch(e: Array, v: dict, target: Target) -> tuple[Array, Array
         return jax.ops.segment_sum(x, block_trace, n_traces).T
 
     sigma = v["sigma_n"]
-    phi = noise.phi(v)
-    w = whiten(e.T, t.first, phi)  # (blocks, walkers)
-    head = jnp.sqrt(1.0 - phi**2)
-    nxt = jnp.where(t.continues[:, None], jnp.roll(w, -1, axis=0), 0.0)
-    lt_w = jnp.where(t.first[:, None], head * w, w) - phi * nxt
-    h = jax.ops.segment_sum(t.jac_e[:, :, None] * lt_w[:, None, :], block_trace, n_traces)
-    h = jnp.moveaxis(h, -1, 0)  # (walkers, traces, groups)
+    state = noise.state_of(v)  # (k, walkers)
+    w = noise.whiten(e.T, t.first, state)  # (blocks, walkers)
+    h, g = noise.nuisance_equations(w, t.jac_e, t.gram, t.first, t.continues, block_trace, state)
 
     def per_walker(x):  # (walkers,) -> broadcast against (walkers, traces, groups, groups)
         return x[:, None, None, None]
 
-    g = t.gram[0] + per_walker(phi) * t.gram[1] + per_walker(phi**2) * t.gram[2]
     # Precision of the nuisances (Fisher information for Student-t), prior included.
     scale = noise.nuisance_information(v) / sigma**2
     prior_prec = 1.0 / NUISANCE_PRIOR_SD**2
@@ -239,7 +210,7 @@ def trace_logliks_batch(e: Array, v: dict, target: Target) -> tuple[Array, Array
     n = per_trace(jnp.ones_like(w))  # blocks per trace, (walkers, traces)
     p = shift.shape[2]
     if not noise.gaussian:  # Laplace: the innovations' own density at the shifted mode
-        jw = whiten(t.jac_e[:, :, None], t.first, phi)  # (blocks, 4, walkers)
+        jw = noise.whiten(t.jac_e[:, :, None], t.first, state)  # (blocks, 4, walkers)
         moved = jnp.moveaxis(shift, 0, -1)[block_trace]  # (blocks, 4, walkers)
         w_fit = w + jnp.sum(jw * moved, axis=1)
         u = w_fit / sigma
@@ -251,7 +222,7 @@ def trace_logliks_batch(e: Array, v: dict, target: Target) -> tuple[Array, Array
         ll = ll - 0.5 * per_trace(w**2) / (sigma**2)[:, None]
         ll = ll + 0.5 * jnp.sum(y**2, axis=(2, 3))
     ll = ll - 0.5 * log_det - p * math.log(NUISANCE_PRIOR_SD)
-    return ll + 0.5 * jnp.log1p(-(phi**2))[:, None], shift
+    return ll + noise.trace_log_det(state)[:, None], shift
 
 
 def marginal_loglik(e: Array, v: dict, target: Target) -> tuple[Array, Array]:

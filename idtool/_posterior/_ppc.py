@@ -78,22 +78,15 @@ def _lag1(e: np.ndarray, first: np.ndarray) -> np.ndarray:
 
 def replicate_blocks(theta: np.ndarray, target: Target, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Replicated block means [N] (draws, blocks) for internal draws ``theta`` (draws,
-    ndim): the model at each draw, its nuisances at their conditional mode, plus AR(1)
-    noise with the draw's innovations (seeded); and the noise-free model means."""
+    ndim): the model at each draw, its nuisances at their conditional mode, plus the
+    noise model's noise at the draw (:meth:`AbstractNoise.simulate`, seeded); and the
+    noise-free model means."""
     means = np.asarray(_means(jnp.asarray(theta), target))
     by_name = {
         p.name: np.asarray(p.value(jnp.asarray(theta[:, i]))) for i, p in enumerate(target.params)
     }
-    sigma = by_name["sigma_n"][:, None]
-    phi = by_name.get("phi", np.zeros(theta.shape[0]))
     rng = np.random.default_rng(seed)
-    n_blocks = means.shape[1]
-    eps = target.model.noise.draw_innovations(rng, by_name, n_blocks) * sigma
-    first = np.asarray(target.first)
-    noise = np.empty_like(eps)
-    head = 1.0 / np.sqrt(1.0 - phi**2)
-    for i in range(n_blocks):
-        noise[:, i] = eps[:, i] * head if first[i] else phi * noise[:, i - 1] + eps[:, i]
+    noise = target.model.noise.simulate(rng, by_name, np.asarray(target.first))
     return means + noise, means
 
 

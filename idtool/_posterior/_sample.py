@@ -123,7 +123,9 @@ def _fingerprint(fit: FitLike) -> str:
     h = hashlib.sha256()
     # the covariance as its state file holds it: a dense one (a folder written before
     # the blocks) hashes to what it did, so its chains resume
-    for a in (fit.z, *covariance_state(fit.cov_z).values(), np.array([fit.phi])):
+    # the noise state as phi alone was (an empty state as phi = 0): old chains resume
+    state = np.asarray(fit.noise_state, float)
+    for a in (fit.z, *covariance_state(fit.cov_z).values(), state if state.size else np.zeros(1)):
         h.update(np.ascontiguousarray(a, dtype=float).tobytes())
     return h.hexdigest()
 

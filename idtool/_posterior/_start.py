@@ -1,7 +1,8 @@
 """Where the walkers start (issue 5): the posterior mode, checked for a better one.
 
 1. The noise parameters start from the fit's residuals (sigma from the whitened
-   residuals, phi from the fit, nu = 10), with their asymptotic standard errors.
+   residuals, the correlation state (AR(1): phi) from the fit's, nu = 10), with their
+   asymptotic standard errors.
 2. The log-posterior is maximised (optimistix's BFGS on its JAX gradient) from the fit's optimum
    and from each other optimum of the fit's multi-start with a residual sum of squares
    within ``RSS_FACTOR`` of the best. A fit can stop in a local
@@ -32,7 +33,6 @@ from idtool._diagnostic import Diagnostic
 from idtool._errors import IdtoolError
 from idtool._fit._folder import FIT_JSON
 from idtool._fit._result import Z_AT_BOUND
-from idtool._model._noise import whiten
 from idtool._model._params import Param
 from idtool._posterior._likelihood import (
     Target,
@@ -86,17 +86,22 @@ def _noise_start(fit: Any, target: Target) -> tuple[list[float], list[float]]:
     shared = {p.name: jnp.asarray(p.value(fit.z[i])) for i, p in enumerate(target.params[:k])}
     e = np.asarray(_predict(shared, target) - target.force_n)
     n = e.size
-    phi = fit.phi if "phi" in target.names else 0.0
-    sigma = float(np.sqrt(np.mean(np.asarray(whiten(jnp.asarray(e), target.first, phi)) ** 2)))
+    noise = target.model.noise
+    # the fit's state by name (the sampler's noise model may be another one)
+    state = noise.state_from_names(fit.model.noise.state_by_name(fit.noise_state))
+    state_sd = noise.state_sd(state, n)
+    w = np.asarray(noise.whiten(jnp.asarray(e), target.first, state))
+    sigma = float(np.sqrt(np.mean(w**2)))
     start, sd = [], []
     for p in target.params[k:]:
         if p.name == "sigma_n":
-            scale = 1.0 if target.model.noise.gaussian else 0.8  # a t scale is below the sd
+            scale = 1.0 if noise.gaussian else 0.8  # a t scale is below the sd
             start.append(scale * sigma)
             sd.append(scale * sigma / np.sqrt(2.0 * n))
-        elif p.name == "phi":
-            start.append(phi)
-            sd.append(float(np.sqrt((1.0 - phi**2) / n)))
+        elif p in noise.state_params:
+            j = noise.state_params.index(p)
+            start.append(float(state[j]))
+            sd.append(float(state_sd[j]))
         else:  # nu
             start.append(10.0)
             sd.append(3.0)

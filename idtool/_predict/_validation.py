@@ -176,9 +176,9 @@ def _model_for(model: BenchModel, dataset: Dataset) -> BenchModel:
 
 
 def validate(
-    model: BenchModel, z: np.ndarray, phi: float, draws: Draws, dataset: Dataset
+    model: BenchModel, z: np.ndarray, state: np.ndarray, draws: Draws, dataset: Dataset
 ) -> Validation:
-    """Validate the fit (``model`` at internal ``z``, AR(1) coefficient ``phi``;
+    """Validate the fit (``model`` at internal ``z``, noise correlation ``state``;
     prediction ``draws``) on ``dataset``'s traces (module docstring)."""
     held = _model_for(model, dataset)
     shared = {q.name: float(z[i]) for i, q in enumerate(model.shared_params)}
@@ -187,7 +187,7 @@ def validate(
         z0[i] = shared[q.name]
     mask = np.zeros(z0.size, bool)
     mask[held.n_shared :] = True  # the traces' own nuisances only
-    out = run_lm(held, jnp.asarray(z0), jnp.asarray(mask), phi, _STEPS)
+    out = run_lm(held, jnp.asarray(z0), jnp.asarray(mask), state, _STEPS)
     if not bool(out.converged):
         raise IdtoolError(
             f"{dataset.name}: the held-out traces' nuisances did not converge in "
@@ -197,7 +197,7 @@ def validate(
     pred = np.asarray(held.predict(jnp.asarray(zv)))
     d = held.data
     try:
-        free = free_levels(held, zv, phi)
+        free = free_levels(held, zv, state)
     except np.linalg.LinAlgError as err:
         raise IdtoolError(
             f"{dataset.name}: the held-out traces' own levels cannot be read ({err}); "

@@ -137,6 +137,8 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
             "residual_hum_fraction": d.residual_hum_fraction,
             "phi": r.phi,
             "sigma_n": r.sigma_n,
+            # the noise model's correlation state by name (AbstractNoise.state_params)
+            "parameters": r.model.noise.state_by_name(r.noise_state),
         },
         "variability": _variability_json(r),
         # the levels' trends within their plateaus (_fit/_plateau_drift.py)
@@ -279,8 +281,9 @@ def fit_report(run: FitRun) -> str:
         f"{r.model.actuator.name} actuator, {r.model.offset.name} load-cell offset, "
         f"{r.model.level.name} levels",
         f"    choice       {run.reason}",
-        f"    noise        {r.model.noise.description} ({r.model.noise.name}), phi = {r.phi:.3f}, "
-        f"innovation sigma = {r.sigma_n:.3g} N",
+        f"    noise        {r.model.noise.description} ({r.model.noise.name}), "
+        + "".join(f"{k} = {v:.3f}, " for k, v in _noise_state_shown(r).items())
+        + f"innovation sigma = {r.sigma_n:.3g} N",
         f"    statistics   log L = {r.loglik:.1f}, AIC = {r.aic:.1f}, BIC = {r.bic:.1f}, "
         f"{r.n_params} parameters, {r.lm_steps} Levenberg-Marquardt steps",
         "[[Physical parameters]]  (95% intervals from the Gauss-Newton covariance"
@@ -378,16 +381,22 @@ def shown_traces(resid_n: np.ndarray, block_trace: np.ndarray, n_traces: int) ->
     return np.sort(worst)
 
 
+def _noise_state_shown(r: FitResult) -> dict[str, float]:
+    """The noise's correlation state the report prints, by name: phi = 0 for a model
+    without one, as reports before the state did."""
+    return r.model.noise.state_by_name(r.noise_state) or {"phi": r.phi}
+
+
 def plot_fit(run: FitRun, out_dir: str | Path) -> list[Path]:
     """``traces.png`` (data and fit, with the 95% band of the block means' noise around
-    the fit: +-1.96 sigma_n / sqrt(1 - phi^2), the AR(1) noise's stationary sd; one
+    the fit: +-1.96 times the noise's stationary sd (AR(1): sigma_n / sqrt(1 - phi^2)); one
     panel per trace, at most :data:`MAX_TRACE_PANELS`: :func:`shown_traces`),
     ``residuals.png`` and, if profiled, ``profile.png``."""
     r, d = run.chosen, run.data
     out = Path(out_dir)
-    pred, w = prediction_at(r.model, r.z, r.phi)
+    pred, w = prediction_at(r.model, r.z, r.noise_state)
     resid = d.force_n - pred
-    half = 1.96 * r.sigma_n / np.sqrt(1.0 - min(r.phi**2, 0.999))
+    half = 1.96 * r.sigma_n * r.model.noise.stationary_sd_factor(r.noise_state)
     shown = shown_traces(resid, np.asarray(d.block_trace), d.n_traces)
     cols = 4
     rows = int(np.ceil(shown.size / cols))
