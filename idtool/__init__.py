@@ -30,7 +30,12 @@ _os.environ["JAX_ENABLE_X64"] = "1"
 if "jax" in _sys.modules:
     _sys.modules["jax"].config.update("jax_enable_x64", True)
 
+# JAX's CPU backend, when it starts, with one intra-op thread: jaxlib 0.10's batched
+# LAPACK kernels deadlock a larger pool (idtool._xla_pool). Runs when JAX is imported.
+from idtool import _xla_pool
 from idtool._version import __version__
+
+_xla_pool.install()
 
 # Public name -> the private module defining it. Imported on first use (module
 # __getattr__, PEP 562): ``import idtool`` costs a few milliseconds, and a command
