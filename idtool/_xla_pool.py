@@ -54,7 +54,8 @@ def _tasks() -> set[int]:
 def start_backend(jax: ModuleType) -> None:
     """Start ``jax``'s backends with a one-thread intra-op pool (module docstring);
     nothing if they started already or this is its second call. Where the CPU affinity
-    cannot be set (not Linux), the backends start as JAX would start them."""
+    cannot be set (not Linux) or holds one CPU, the backends are left to start as JAX
+    starts them, when first used."""
     global _started
     if _started:
         return
@@ -65,13 +66,17 @@ def start_backend(jax: ModuleType) -> None:
         return
     affinity = getattr(os, "sched_getaffinity", None)
     full = affinity(0) if affinity is not None else set()
-    if len(full) <= 1:
-        jax.devices()
+    if len(full) <= 1:  # one CPU: a pool of one anyway, started when first used
         return
     before = _tasks()
     os.sched_setaffinity(0, {min(full)})  # this thread only; new threads inherit it
     try:
         jax.devices()
+    except Exception:
+        # a backend that cannot start (JAX_PLATFORMS naming a missing plugin raises an
+        # AssertionError in jax 0.10) fails again where it is first used, as it would
+        # without idtool, not at the import of JAX
+        pass
     finally:
         for tid in (_tasks() - before) | {0}:
             with contextlib.suppress(OSError):  # a thread that ended meanwhile

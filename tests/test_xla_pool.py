@@ -66,3 +66,17 @@ def test_concurrent_batched_lapack_calls_finish():
 
 def test_idtool_alone_still_does_not_import_jax():
     assert run("import sys, idtool\nprint('jax' in sys.modules)") == "False"
+
+
+def test_a_backend_that_cannot_start_fails_at_first_use_not_at_import():
+    """JAX_PLATFORMS naming a device without its plugin: ``import jax`` still works
+    after ``import idtool`` (the error comes where JAX would raise it without idtool)."""
+    env = dict(os.environ, JAX_PLATFORMS="cuda")
+    done = subprocess.run(
+        [sys.executable, "-c", "import idtool, jax\nprint('imported')"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=env,
+    )
+    assert done.returncode == 0 and done.stdout.strip() == "imported", done.stderr
