@@ -1,7 +1,9 @@
 """Small simulated fits shared by the posterior and prediction tests (fitted once per run).
 
 The design: loads 270 and 670 N (450 N is held out), amplitudes 50% and 70%, ON times
-1 s and 2 s, 1.5 s of sliding before and after: 8 traces, about 1100 block means.
+1 s and 2 s, 1.5 s of sliding before and after: 8 traces, about 1100 block means. And
+:func:`random_arrow`, the arrowhead normal equations of a random block-sparse Jacobian
+(the solver's and the covariance's tests).
 """
 
 from __future__ import annotations
@@ -9,7 +11,10 @@ from __future__ import annotations
 import functools
 import json
 
+import numpy as np
+
 import idtool
+from idtool._fit._arrow import Arrow
 from idtool._fit._run import FitRun, fit_dataset
 from idtool._simulate._params import BenchParams
 from idtool._simulate._simulate import operating_point
@@ -66,3 +71,29 @@ def two_trace_data():
     e.update(sliding_before_s=1.0, sliding_after_s=1.0)
     dataset, _ = idtool.simulate_bench(params, seed=2)
     return prepare_fit_data(dataset, periods_per_block=2)
+
+
+def random_arrow(
+    seed: int = 0,
+    s: int = 3,
+    m: int = 5,
+    nb: int = 4,
+    rows: int = 12,
+    zero: tuple[int, int] | None = None,
+) -> Arrow:
+    """Normal equations (NumPy) of a random block-sparse J: ``s`` shared parameters and
+    ``m`` traces of ``rows`` residuals and ``nb`` nuisances each, well conditioned
+    unless ``zero`` = (trace, slot) names a nuisance that moves no residual (a zero
+    column, as a parameter the data do not move)."""
+    rng = np.random.default_rng(seed)
+    js, jb = rng.standard_normal((m, rows, s)), rng.standard_normal((m, rows, nb))
+    if zero is not None:
+        jb[zero[0], :, zero[1]] = 0.0
+    r = rng.standard_normal((m, rows))
+    return Arrow(
+        a=np.einsum("mns,mnt->st", js, js),
+        b=np.einsum("mns,mnb->msb", js, jb),
+        d=np.einsum("mnb,mnc->mbc", jb, jb),
+        gs=np.einsum("mns,mn->s", js, r),
+        gb=np.einsum("mnb,mn->mb", jb, r),
+    )

@@ -7,6 +7,7 @@ import functools
 import equinox as eqx
 import numpy as np
 import pytest
+from sample_helpers import random_arrow
 
 import idtool
 from idtool._data._blocks import prepare_fit_data
@@ -67,25 +68,9 @@ def test_estimates_and_intervals_equal_the_dense_reference(fits):
     assert [str(w) for w in arrow.warnings] == [str(w) for w in reference.warnings]
 
 
-def zero_column_arrow(seed: int = 0, s: int = 3, m: int = 5, nb: int = 4) -> Arrow:
-    """Normal equations of a random block-sparse J whose trace 2 slot 1 nuisance moves
-    no residual (a zero column, as a parameter the data do not move)."""
-    rng = np.random.default_rng(seed)
-    js, jb = rng.standard_normal((m, 12, s)), rng.standard_normal((m, 12, nb))
-    jb[2, :, 1] = 0.0
-    r = rng.standard_normal((m, 12))
-    return Arrow(
-        a=np.einsum("mns,mnt->st", js, js),
-        b=np.einsum("mns,mnb->msb", js, jb),
-        d=np.einsum("mnb,mnc->mbc", jb, jb),
-        gs=np.einsum("mns,mn->s", js, r),
-        gb=np.einsum("mnb,mn->mb", jb, r),
-    )
-
-
 @pytest.mark.parametrize("singular", [False, True])
 def test_the_covariance_from_the_schur_complement_is_the_dense_pseudo_inverse(singular):
-    arrow = zero_column_arrow()
+    arrow = random_arrow(zero=(2, 1))  # trace 2's nuisance 1 moves no residual
     if not singular:  # the zero column filled in
         arrow = eqx.tree_at(lambda a: a.d, arrow, arrow.d + 0.5 * np.eye(arrow.d.shape[-1]))
     blocks, ratio, vector = inverse_and_weakest(arrow, 3)

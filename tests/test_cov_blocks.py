@@ -8,12 +8,11 @@ import shutil
 
 import numpy as np
 import pytest
-from sample_helpers import small_fit
-from test_arrowhead import zero_column_arrow
+from sample_helpers import random_arrow, small_fit
 
 import idtool
 from idtool._fit import _program
-from idtool._fit._arrow import Arrow, block_index, inverse_and_weakest
+from idtool._fit._arrow import block_index, inverse_and_weakest
 from idtool._fit._cov import STATE_KEYS, ArrowCovariance, DenseCovariance
 from idtool._fit._folder import FIT_STATE
 from idtool._fit._intervals import profile_start
@@ -21,20 +20,6 @@ from idtool._posterior._likelihood import conditioning_shrinkage
 from idtool._predict._predict import draws_from_covariance
 
 REL = 1e-10
-
-
-def random_arrow(seed: int = 1, s: int = 4, m: int = 7, nb: int = 3) -> Arrow:
-    """Normal equations of a random, well-conditioned block-sparse J."""
-    rng = np.random.default_rng(seed)
-    js, jb = rng.standard_normal((m, 20, s)), rng.standard_normal((m, 20, nb))
-    r = rng.standard_normal((m, 20))
-    return Arrow(
-        a=np.einsum("mns,mnt->st", js, js),
-        b=np.einsum("mns,mnb->msb", js, jb),
-        d=np.einsum("mnb,mnc->mbc", jb, jb),
-        gs=np.einsum("mns,mn->s", js, r),
-        gb=np.einsum("mnb,mn->mb", jb, r),
-    )
 
 
 def close(got, ref, where: str = "") -> None:
@@ -75,7 +60,7 @@ def check_every_operation(blocks: ArrowCovariance, seed: int = 0) -> None:
 def test_the_blocks_are_the_dense_pseudo_inverse(singular):
     """(a) a random well-conditioned arrowhead; (b) one with a zero column (a nuisance the
     data do not move): the pseudo-inverse's semantics, zero variance there."""
-    arrow = zero_column_arrow() if singular else random_arrow()
+    arrow = random_arrow(zero=(2, 1)) if singular else random_arrow(1, s=4, m=7, nb=3, rows=20)
     blocks, ratio, _ = inverse_and_weakest(arrow, arrow.a.shape[0])
     assert isinstance(blocks, ArrowCovariance)
     jtj, _ = arrow.dense()
@@ -98,7 +83,7 @@ def test_the_blocks_are_the_dense_pseudo_inverse(singular):
 
 def test_nothing_of_size_p_by_p_is_kept():
     """The blocks' memory is linear in the traces: no array with a dimension p."""
-    arrow = random_arrow(s=3, m=40, nb=4)
+    arrow = random_arrow(1, s=3, m=40, nb=4, rows=20)
     blocks, _, _ = inverse_and_weakest(arrow, 3)
     p = blocks.size
     fields = [getattr(blocks, f.name) for f in dataclasses.fields(blocks)]

@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from sample_helpers import random_arrow
 from scipy.optimize import least_squares
 
 import idtool
@@ -71,30 +72,21 @@ def test_arrowhead_blocks_equal_the_dense_normal_equations_on_a_toy_problem():
     np.testing.assert_allclose(dense_jtr, jtr, rtol=1e-14, atol=1e-14)
 
 
-def random_arrow(seed: int, s: int = 3, m: int = 5, nb: int = 4) -> Arrow:
-    """A well-posed arrowhead system: the normal equations of a random block-sparse J."""
-    rng = np.random.default_rng(seed)
-    js, jb = rng.standard_normal((m, 12, s)), rng.standard_normal((m, 12, nb))
-    r = rng.standard_normal((m, 12))
-    return Arrow(
-        a=jnp.asarray(np.einsum("mns,mnt->st", js, js)),
-        b=jnp.asarray(np.einsum("mns,mnb->msb", js, jb)),
-        d=jnp.asarray(np.einsum("mnb,mnc->mbc", jb, jb)),
-        gs=jnp.asarray(np.einsum("mns,mn->s", js, r)),
-        gb=jnp.asarray(np.einsum("mnb,mn->mb", jb, r)),
-    )
+def jax_arrow(seed: int) -> Arrow:
+    """:func:`sample_helpers.random_arrow` (12 rows a trace) on JAX arrays."""
+    return jax.tree.map(jnp.asarray, random_arrow(seed))
 
 
 @pytest.mark.parametrize("masked", [False, True])
 def test_schur_solve_equals_the_dense_solve(masked):
     """The arrowhead's solve (nuisances eliminated, Schur complement, back-substitution),
     product, diagonal and masking are the dense matrix's."""
-    arrow = random_arrow(0)
+    arrow = jax_arrow(0)
     p = arrow.grad.size
     rng = np.random.default_rng(1)
     mask = jnp.asarray(rng.random(p) > 0.3) if masked else jnp.ones(p, bool)
     arrow = arrow.masked(mask)
-    dense = DenseNormal(*random_arrow(0).dense()).masked(mask)
+    dense = DenseNormal(*jax_arrow(0).dense()).masked(mask)
     np.testing.assert_array_equal(arrow.dense()[0], dense.jtj)
     np.testing.assert_array_equal(arrow.grad, dense.grad)
     shift, v = jnp.asarray(rng.random(p)), jnp.asarray(rng.standard_normal(p))

@@ -11,13 +11,16 @@ import pickle
 from typing import ClassVar
 
 import jax.numpy as jnp
+import numpy as np
 import pytest
 
+from idtool._data._blocks import prepare_fit_data
 from idtool._data._example import example_params_path
 from idtool._data._schema import SIMULATOR_PARAMS_SCHEMA, _schema_text
 from idtool._data._write import json_bytes
 from idtool._errors import IdtoolError
 from idtool._model._coupling import COUPLINGS, GAIN, AbstractCoupling
+from idtool._model._noise import NOISE_MODELS
 from idtool._model._params import Param
 from idtool._simulate import _records
 from idtool._simulate._departures import departure_params
@@ -39,6 +42,10 @@ def test_every_registered_coupling_law_is_a_simulator_choice():
     assert {"load_exponential", "tanh_ceiling"} < set(choices)
     laws = schema["properties"]["contact"]["properties"]["friction_law"]["enum"]
     assert laws == ["coulomb", "dahl", "lugre"]
+    noise = schema["properties"]["block_mean_noise"]["properties"]
+    assert noise["model"]["enum"] == list(NOISE_MODELS)  # the registry's names, as registered
+    assert {"sigma_n", "phi", "nu"} <= set(noise)
+    assert "block_mean_noise" not in schema["required"]
 
 
 def _example() -> dict:
@@ -126,6 +133,30 @@ def test_the_benches_are_those_simulated_before_the_registries(bench):
         params = _shrunk(departure_params(kind, 5))
     dataset, _ = simulate_bench(params, seed=7)
     assert dataset.sha256 == _BEFORE[bench]
+
+
+def test_block_mean_noise_absent_changes_no_byte_and_present_moves_only_block_means():
+    """Without ``block_mean_noise`` the example is the bench pinned above, bit for bit;
+    with it, every trace differs from that bench by one constant per fit block (each
+    block mean moves by its draw, nothing else moves) and the file round-trips."""
+    params = load_bench_params(example_params_path())
+    assert params.block_mean_noise is None and "block_mean_noise" not in params.to_dict()
+    plain, _ = simulate_bench(params, seed=7)
+    assert plain.sha256 == _BEFORE["example"]
+    doc = params.to_dict() | {"block_mean_noise": {"model": "gaussian", "sigma_n": 0.2}}
+    noisy, truth = simulate_bench(doc, seed=7)
+    assert BenchParams.from_dict(doc).to_dict() == doc == truth.to_dict()["params"]
+    data = prepare_fit_data(plain, mains_hz=50.0, periods_per_block=2)
+    size = round(data.block_s * plain.traces[0].sample_rate_hz)
+    drawn = []
+    for before, after in zip(plain.traces, noisy.traces, strict=True):
+        moved = np.asarray(after.force_n) - np.asarray(before.force_n)
+        blocks = moved[: moved.size // size * size].reshape(-1, size)
+        np.testing.assert_allclose(blocks, blocks[:, :1] + 0 * blocks, atol=1e-12)
+        assert np.all(moved[blocks.size :] == 0.0)  # the tail past the last block
+        drawn.extend(blocks[:, 0])
+    # 0.2 N Gaussian, one draw per block (about 3600 here): the sd within 5%
+    assert np.std(drawn) == pytest.approx(0.2, rel=0.05) and len(drawn) > 3000
 
 
 def test_a_record_pickles_and_is_found_by_name():

@@ -1,9 +1,10 @@
 """A noise model defined outside the package is one class plus its registration: a toy
-AR(2) model of the block means, registered here, is simulated (block-mean noise drawn
-from it on the fit's blocks, idtool._simulate._block_noise) and fitted back. AR(1), the
-default, cannot see its lag-2 correlation; the toy's fit can, through the interface
-alone (AbstractNoise: the state, whitening, its inverse, its estimate, its
-log-determinant)."""
+AR(2) model of the block means, registered here, is named in a simulator parameter file
+(its ``block_mean_noise``, written here and simulated by ``idtool simulate-bench``:
+block-mean noise drawn from it on the fit's blocks, idtool._simulate._block_noise) and
+fitted back. AR(1), the default, cannot see its lag-2 correlation; the toy's fit can,
+through the interface alone (AbstractNoise: the state, whitening, its inverse, its
+estimate, its log-determinant)."""
 
 from __future__ import annotations
 
@@ -15,9 +16,11 @@ import numpy as np
 import pytest
 
 import idtool
+from idtool._cli._main import main
 from idtool._fit._program import prediction_at
 from idtool._model._noise import AR1Noise
-from idtool._simulate._block_noise import with_block_noise
+from idtool._simulate._schema import simulator_params_schema
+from idtool._simulate._simulate import TRUTH_FILE
 
 TRUE_A1, TRUE_A2, TRUE_SIGMA_N = 0.3, 0.4, 0.5
 A1 = idtool.Param("ar2_a1", "1", "tanh", -2.0, 2.0, description="AR(2) lag-1 coefficient")
@@ -93,14 +96,25 @@ def ar2():
     idtool.NOISE_MODELS._entries.pop("test-ar2")
 
 
-@pytest.fixture(scope="module")
-def dataset():
-    """The example's design, its sample-rate load-cell noise off, AR(2) block means."""
+def _params(noise: dict) -> dict:
+    """The example's design, its sample-rate load-cell noise off, ``noise`` as its
+    block-mean noise."""
     p = json.loads(idtool.example_params_path().read_text())
     p["load_cell"].update(white_noise_std_n=0.0, correlated_noise_std_n=0.0)
-    clean, _ = idtool.simulate_bench(p, seed=7)
-    values = {"sigma_n": TRUE_SIGMA_N, "ar2_a1": TRUE_A1, "ar2_a2": TRUE_A2}
-    return with_block_noise(clean, AR2Noise(), values, seed=8)
+    return p | {"block_mean_noise": noise}
+
+
+@pytest.fixture(scope="module")
+def dataset(ar2, tmp_path_factory):
+    """AR(2) block means from a parameter file naming the toy, by the command line."""
+    root = tmp_path_factory.mktemp("toy-noise")
+    noise = {"model": ar2, "sigma_n": TRUE_SIGMA_N, "ar2_a1": TRUE_A1, "ar2_a2": TRUE_A2}
+    (root / "p.json").write_text(json.dumps(_params(noise)))
+    args = ["simulate-bench", "--params", str(root / "p.json"), "--out", str(root / "sim")]
+    assert main([*args, "--seed", "7"]) == 0
+    truth = json.loads((root / "sim" / TRUTH_FILE).read_text())
+    assert truth["params"]["block_mean_noise"] == noise
+    return idtool.load_dataset(root / "sim")
 
 
 def _fit(dataset, noise):
@@ -133,6 +147,41 @@ def test_a_toy_ar2_noise_model_is_simulated_and_fitted_back(ar2, dataset):
     assert ar1.to_json()["noise"]["parameters"] == {"phi": ar1.phi}
     # the exact likelihoods (log-determinants included) prefer the true model
     assert toy.result.loglik > ar1.result.loglik + 50.0
+
+
+def test_the_toy_is_a_choice_of_the_parameter_file_and_checked_there(ar2, tmp_path, capsys):
+    """The schema made now lists the toy and its own parameters with their ranges; the
+    file's bad name, missing parameter and non-stationary parameters are located
+    errors (exit status 2 from the command line), not tracebacks."""
+    section = simulator_params_schema()["properties"]["block_mean_noise"]
+    assert ar2 in section["properties"]["model"]["enum"]
+    assert section["properties"]["ar2_a2"]["exclusiveMaximum"] == 1.0
+    assert "AR(2) lag-1 coefficient [-]" in section["properties"]["ar2_a1"]["description"]
+    good = {"model": ar2, "sigma_n": 0.5, "ar2_a1": 0.3, "ar2_a2": 0.4}
+    record = idtool.BenchParams.from_dict(_params(good)).block_mean_noise
+    assert record is not None and record.values() == {k: good[k] for k in good if k != "model"}
+    assert type(record.noise()) is AR2Noise
+    bad = {
+        "ar3": ({"model": "ar3", "sigma_n": 0.5}, "block_mean_noise.model", "test-ar2"),
+        "missing": (
+            {"model": ar2, "sigma_n": 0.5, "ar2_a1": 0.3},
+            "block_mean_noise.ar2_a2",
+            "missing required field",
+        ),
+        # inside each coefficient's range, outside the stationary triangle: c0^2 < 0
+        "explosive": (
+            {"model": ar2, "sigma_n": 0.5, "ar2_a1": 1.5, "ar2_a2": 0.6},
+            "block_mean_noise",
+            "stationary",
+        ),
+    }
+    for name, (noise, column, words) in bad.items():
+        path = tmp_path / f"{name}.json"
+        path.write_text(json.dumps(_params(noise)))
+        assert main(["simulate-bench", "--params", str(path), "--out", str(tmp_path / name)]) == 2
+        err = capsys.readouterr().err
+        assert f"{path}, column '{column}'" in err and words in err, (name, err)
+        assert not (tmp_path / name).exists()
 
 
 def test_the_generic_nuisance_equations_match_ar1s_gram():

@@ -33,6 +33,10 @@ def _run(args: argparse.Namespace) -> int:
             f"{t.id:<18} {t.friction_ratio:>6.3f} {lam:>7} "
             f"{vr:>6}  {'yes' if t.reaches_on_level else 'no'}"
         )
+    noise = params.block_mean_noise
+    if noise is not None:
+        numbers = ", ".join(f"{k} = {v:g}" for k, v in noise.values().items())
+        print(f"block-mean noise from noise model '{noise.model}' ({numbers}) on the fit's blocks")
     if not params.coupling.in_fit:
         print(
             f"coupling law '{params.coupling.law}' is truth only: idtool fit has no such law, "
@@ -45,9 +49,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "simulate-bench",
         help="simulate bench load-cell traces as a format-v1 dataset",
-        description="Simulate the seat-belt bench (the bench model plus load-cell noise) "
-        "for the experiment matrix of a parameter file (datasets_schema/"
-        "simulator_params.schema.json) and write the dataset with true_parameters.json.",
+        description="Simulate the seat-belt bench (the bench model plus load-cell noise, "
+        "and block-mean noise from a registered noise model if the file's "
+        "block_mean_noise asks for it) for the experiment matrix of a parameter file "
+        "(datasets_schema/simulator_params.schema.json) and write the dataset with "
+        "true_parameters.json.",
     )
     p.add_argument("--out", required=True, metavar="DIR", help="dataset folder to create")
     p.add_argument("--params", required=True, metavar="P.json", help="simulator parameter file")

@@ -24,6 +24,7 @@ from idtool._data._dataset import Dataset, TransducerSpec
 from idtool._errors import IdtoolError, Problem
 
 __all__ = [
+    "FIT_PERIODS_PER_BLOCK",
     "BlockLayout",
     "DataLabels",
     "FitData",
@@ -41,6 +42,9 @@ PERIOD_TOLERANCE = 0.005
 # Periods searched beyond the requested number before settling for the best miss:
 # longer blocks would blur the ON dips (0.3 s long on the bench).
 MAX_EXTRA_PERIODS = 4
+# The mains periods the fit asks of each block (idtool/_fit/_run.py); the simulator's
+# block-mean noise is drawn on the same blocks (idtool/_simulate/_block_noise.py).
+FIT_PERIODS_PER_BLOCK = 2
 
 
 class FitData(eqx.Module):

@@ -30,7 +30,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from idtool._data._blocks import FitData, prepare_fit_data
+from idtool._data._blocks import FIT_PERIODS_PER_BLOCK, FitData, prepare_fit_data
 from idtool._data._dataset import Dataset
 from idtool._data._design import speed_resolved_pairs
 from idtool._data._mains import resolve_mains
@@ -200,7 +200,9 @@ def fit_dataset(
             progress(f"[{time.perf_counter() - started:5.1f} s] {what}")
 
     mains, mains_source, run_warnings = resolve_mains(dataset, mains_hz)
-    data = prepare_fit_data(dataset, mains_hz=mains, periods_per_block=2, mains_source=mains_source)
+    data = prepare_fit_data(
+        dataset, mains_hz=mains, periods_per_block=FIT_PERIODS_PER_BLOCK, mains_source=mains_source
+    )
     run_warnings = [Diagnostic("data", w) for w in [*run_warnings, *data.notes]]  # mains, blocks
     laws: tuple[str, ...] = (law,)
     if compare_laws:

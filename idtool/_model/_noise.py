@@ -54,6 +54,7 @@ from jaxtyping import Array, Float
 
 from idtool._model._names import DEFAULT_NOISE
 from idtool._model._params import Param
+from idtool._model._truth_fields import TruthField
 from idtool._registry import Registry
 
 __all__ = [
@@ -119,6 +120,13 @@ class AbstractNoise(eqx.Module):
     state_params: ClassVar[tuple[Param, ...]] = ()
     gaussian: ClassVar[bool] = True
     description: ClassVar[str] = ""
+
+    @classmethod
+    def truth_fields(cls) -> tuple[TruthField, ...]:
+        """The model's numbers in the simulator's parameter file (its
+        ``block_mean_noise`` section): :attr:`params` under their own names, each inside
+        its open range (where the model's whitening is defined, ``|phi| < 1``)."""
+        return tuple(TruthField.of(p, bounded=True) for p in cls.params)
 
     @property
     def autoregressive(self) -> bool:

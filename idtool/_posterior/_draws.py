@@ -33,12 +33,13 @@ def draws_from_posterior(
     conditioning: Conditioning | None = None,
 ) -> Draws:
     """Prediction draws from an in-memory :class:`~idtool._posterior._posterior.Posterior`
-    (kept draws, thinned evenly to ``max_draws``); the sds from the posterior, else
-    from the fit's ``sd_grids``; the discrepancy conditioned on ``conditioning`` (default:
-    the posterior's own)."""
+    (the draws ``posterior.nc`` keeps, :meth:`PosteriorRecord.stored_draws`, thinned
+    evenly to ``max_draws``: the same as :func:`draws_from_stored` once it is saved);
+    the sds from the posterior, else from the fit's ``sd_grids``; the discrepancy
+    conditioned on ``conditioning`` (default: the posterior's own)."""
     unconverged = "" if post.diagnostics.converged else "; the chain is NOT converged"
     cond = conditioning or post.conditioning
-    chain = post.draws()
+    chain = post.stored_draws()
     return chain_draws(chain, post.noise, unconverged, model, max_draws, sd_grids, seed, cond)
 
 

@@ -51,20 +51,12 @@ from idtool._posterior._likelihood import (
     trace_logliks_batch,
 )
 from idtool._posterior._ppc import replicate_blocks
-from idtool._posterior._record import LEVELS, PosteriorRecord
+from idtool._posterior._record import LEVELS, MAX_DRAWS, PosteriorRecord, thinned_steps
 
 __all__ = ["MAX_DRAWS", "levels_groups", "model_check_groups", "noise_groups", "thinned_steps"]
 
-MAX_DRAWS = 4000  # as many as Stan keeps by default; PSIS-LOO needs a few thousand
 PREDICTIVE_DRAWS = 200  # noise-only posterior predictive: block means of 200 draws
 _CHUNK = 1000  # draws per compiled call (memory: draws x levels^2 on the dense path)
-
-
-def thinned_steps(kept_steps: int, walkers: int, max_draws: int = MAX_DRAWS) -> np.ndarray:
-    """Indices into the kept steps: every k-th, k the smallest step so that walkers x
-    steps <= ``max_draws``, ending at the last step."""
-    k = max(1, math.ceil(kept_steps * walkers / max_draws))
-    return np.arange(kept_steps - 1, -1, -k)[::-1]
 
 
 def _chunked(fn, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:

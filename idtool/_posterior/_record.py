@@ -7,6 +7,7 @@ from a chain read this record, below the :class:`Posterior` that uses them."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any, Protocol
 
 import numpy as np
@@ -21,9 +22,17 @@ from idtool._model._params import Param
 from idtool._posterior._diagnostics import Diagnostics
 from idtool._posterior._prior import Prior
 
-__all__ = ["LEVELS", "FitLike", "PosteriorRecord"]
+__all__ = ["LEVELS", "MAX_DRAWS", "FitLike", "PosteriorRecord", "thinned_steps"]
 
 LEVELS = "levels"  # the 'noise' of a chain sampled on the levels model
+MAX_DRAWS = 4000  # as many as Stan keeps by default; PSIS-LOO needs a few thousand
+
+
+def thinned_steps(kept_steps: int, walkers: int, max_draws: int = MAX_DRAWS) -> np.ndarray:
+    """Indices into the kept steps: every k-th, k the smallest step so that walkers x
+    steps <= ``max_draws``, ending at the last step."""
+    k = max(1, math.ceil(kept_steps * walkers / max_draws))
+    return np.arange(kept_steps - 1, -1, -k)[::-1]
 
 
 class FitLike(Protocol):
@@ -84,6 +93,16 @@ class PosteriorRecord:
         """Kept draws (burn-in dropped) of every parameter, flat, physical units."""
         kept = self.values[self.diagnostics.burn :]
         return {n: kept[:, :, i].ravel() for i, n in enumerate(self.names)}
+
+    def stored_draws(self) -> dict[str, np.ndarray]:
+        """The draws ``posterior.nc`` keeps, in the order it reads back: the kept steps
+        thinned to at most :data:`MAX_DRAWS` draws (:func:`thinned_steps`), walker by
+        walker, physical units. The predictions' draws
+        (:func:`idtool._posterior._draws.draws_from_posterior`), so a sampled fit
+        predicts the same before it is saved and after it is read back."""
+        burn = self.diagnostics.burn
+        kept = self.values[burn:][thinned_steps(self.values.shape[0] - burn, self.values.shape[1])]
+        return {n: np.swapaxes(kept[:, :, i], 0, 1).ravel() for i, n in enumerate(self.names)}
 
     def _model(self) -> BenchModel:
         if self.model is None:

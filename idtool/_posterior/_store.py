@@ -30,8 +30,7 @@ from idtool._diagnostic import records
 from idtool._errors import IdtoolError
 from idtool._fit._folder import POSTERIOR_NC
 from idtool._posterior._diagnostics import import_arviz
-from idtool._posterior._groups import thinned_steps
-from idtool._posterior._record import PosteriorRecord
+from idtool._posterior._record import PosteriorRecord, thinned_steps
 from idtool._version import __version__
 
 __all__ = [

@@ -8,6 +8,12 @@ drawn on the fit's own blocks (:func:`~idtool._data._blocks.prepare_fit_data`: w
 mains periods from each trace's first sample) and added to every sample of its block:
 each block mean then moves by exactly the drawn value, and a model of any correlation
 (tests/test_toy_noise.py: AR(2)) is simulated and fitted back on the same blocks.
+
+A parameter file asks for it in its optional ``block_mean_noise`` section (the model's
+registered name and its parameters, :class:`~idtool._simulate._records.BlockNoiseParams`);
+:func:`idtool._simulate._simulate.simulate_bench` then adds it with
+:func:`add_block_noise`, the blocks those of the fit's default mains
+(:func:`~idtool._data._mains.resolve_mains`).
 """
 
 from __future__ import annotations
@@ -17,27 +23,35 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from idtool._data._blocks import prepare_fit_data
+from idtool._data._blocks import FIT_PERIODS_PER_BLOCK, prepare_fit_data
 from idtool._data._dataset import Dataset, dataset_from_bytes
+from idtool._data._mains import resolve_mains
 from idtool._data._paths import DATASET_FILE
 from idtool._data._write import render_dataset
+from idtool._errors import Problem
 from idtool._model._noise import AbstractNoise
+from idtool._simulate._records import BlockNoiseParams
 
-__all__ = ["with_block_noise"]
+__all__ = ["add_block_noise", "block_noise_problems", "with_block_noise"]
+
+# Blocks drawn to check a file's parameters: enough for a lag-2 model's whole recursion.
+_CHECK_BLOCKS = 8
 
 
 def with_block_noise(
     dataset: Dataset,
     noise: AbstractNoise,
     values: Mapping[str, float],
-    seed: int,
+    seed: int | np.random.Generator,
     mains_hz: float = 50.0,
-    periods_per_block: int = 2,
+    periods_per_block: int = FIT_PERIODS_PER_BLOCK,
+    label: str | None = None,
 ) -> Dataset:
     """``dataset`` with block-mean noise [N] drawn from ``noise`` at parameter ``values``
     by name (``sigma_n`` [N] and the model's others) added to its forces (module
     docstring); blocks of ``periods_per_block`` periods of ``mains_hz`` [Hz], as the fit
-    cuts them (its defaults: 2 periods of the rig's mains). Checked again from its bytes,
+    cuts them (its defaults: 2 periods of the rig's mains); ``seed`` an integer or a
+    generator to draw from. Checked again from its bytes (``label`` names it in errors),
     so its sha256 is that of the new traces."""
     data = prepare_fit_data(dataset, mains_hz=mains_hz, periods_per_block=periods_per_block)
     rng = np.random.default_rng(seed)
@@ -51,4 +65,45 @@ def with_block_noise(
         force[: per_sample.size] += per_sample
         traces.append(dataclasses.replace(tr, force_n=force))
     files = render_dataset(dataclasses.replace(dataset, traces=tuple(traces)))
-    return dataset_from_bytes(files[DATASET_FILE], files, label=f"{dataset.name} + block noise")
+    label = label or f"{dataset.name} + block noise"
+    return dataset_from_bytes(files[DATASET_FILE], files, label=label)
+
+
+def add_block_noise(
+    dataset: Dataset, params: BlockNoiseParams, rng: np.random.Generator, label: str
+) -> Dataset:
+    """A simulated ``dataset`` with the block-mean noise of its parameter file's
+    ``block_mean_noise`` section, drawn from ``rng`` on the blocks a default fit cuts
+    (the mains of :func:`~idtool._data._mains.resolve_mains` without an argument)."""
+    mains_hz, _, _ = resolve_mains(dataset, None)
+    return with_block_noise(
+        dataset, params.noise(), params.values(), rng, mains_hz=mains_hz, label=label
+    )
+
+
+def block_noise_problems(params: BlockNoiseParams, file: str) -> list[Problem]:
+    """Why the noise model of a file's ``block_mean_noise`` cannot be drawn at its
+    parameters (an AR model outside its stationary region, where its whitening has no
+    real scale): a few blocks drawn, none finite. Empty when it can."""
+    first = np.zeros(_CHECK_BLOCKS, bool)
+    first[0] = True
+    values = {k: np.array([v], float) for k, v in params.values().items()}
+    try:
+        # a model's NumPy takes the square root of a negative there: a NaN is the answer
+        with np.errstate(all="ignore"):
+            drawn = params.noise().simulate(np.random.default_rng(0), values, first)
+        finite = bool(np.all(np.isfinite(drawn)))
+    except (ValueError, ArithmeticError):
+        finite = False
+    if finite:
+        return []
+    numbers = ", ".join(f"{k} = {v:g}" for k, v in params.values().items())
+    return [
+        Problem(
+            f"noise model '{params.model}' gives no finite noise at {numbers}: give "
+            "parameters where the model is stationary (an AR model's roots outside the "
+            "unit circle)",
+            file,
+            column="block_mean_noise",
+        )
+    ]

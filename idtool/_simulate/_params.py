@@ -3,13 +3,15 @@
 The dataclasses mirror the JSON file one to one, so ``BenchParams.from_dict(p.to_dict())``
 is ``p`` and the schema's descriptions (with units) document every field.
 
-The ``contact``, ``coupling`` and ``actuator`` sections are the typed records of the
-registered part they name (:mod:`idtool._simulate._records`), checked against the schema
-made from the registries (:mod:`idtool._simulate._schema`).
+The ``contact``, ``coupling`` and ``actuator`` sections, and the optional
+``block_mean_noise``, are the typed records of the registered part they name
+(:mod:`idtool._simulate._records`), checked against the schema made from the registries
+(:mod:`idtool._simulate._schema`).
 
 The optional fields describe departures of the bench from the fit's model (pull-to-pull
 scatter, a lagging actuator, offset drift, a coupling law the fit does not ship, a horn
-fading within its ON windows, a creeping friction level). Their
+fading within its ON windows, a creeping friction level) and block-mean noise drawn
+from a registered noise model (:mod:`idtool._simulate._block_noise`). Their
 defaults are "no departure" and reproduce the simulator's earlier output bit for bit;
 :meth:`BenchParams.to_dict` leaves out optional fields at their defaults, so a file
 without them reads and writes back unchanged.
@@ -26,19 +28,23 @@ from idtool._data._dataset import Rig, TransducerSpec
 from idtool._data._schema import schema_problems
 from idtool._errors import IdtoolError
 from idtool._jsonio import parse_json
+from idtool._simulate._block_noise import block_noise_problems
 from idtool._simulate._records import (
     ActuatorParams,
+    BlockNoiseParams,
     ContactParams,
     CouplingParams,
     actuator_record,
     contact_record,
     coupling_record,
+    noise_record,
 )
 from idtool._simulate._schema import simulator_params_schema
 
 __all__ = [
     "ActuatorParams",
     "BenchParams",
+    "BlockNoiseParams",
     "ContactParams",
     "CouplingParams",
     "ExperimentParams",
@@ -148,19 +154,24 @@ class BenchParams:
     description: str | None = None
     scatter: ScatterParams = ScatterParams()
     horn_fading: FadingParams = FadingParams()
+    block_mean_noise: BlockNoiseParams | None = None
 
     @classmethod
     def from_dict(cls, document: Mapping[str, Any], file: str = "params") -> BenchParams:
         """Check ``document`` against the schema and build the parameters.
 
         Raises:
-            IdtoolError: listing every schema violation, located by field.
+            IdtoolError: listing every schema violation, located by field; a
+                ``block_mean_noise`` whose parameters give the model no finite noise.
         """
         # the schema of the parts registered now (a part registered after import included)
         problems = schema_problems(document, simulator_params_schema(), file)
         if problems:
             raise IdtoolError(f"{file}: invalid simulator parameters", problems)
         d = document
+        noise = noise_record(d["block_mean_noise"]) if "block_mean_noise" in d else None
+        if noise is not None and (problems := block_noise_problems(noise, file)):
+            raise IdtoolError(f"{file}: invalid simulator parameters", problems)
         return cls(
             name=d["name"],
             material=d["material"],
@@ -186,6 +197,7 @@ class BenchParams:
             description=d.get("description"),
             scatter=ScatterParams(**_floats(d.get("scatter", {}))),
             horn_fading=FadingParams(**_floats(d.get("horn_fading", {}))),
+            block_mean_noise=noise,
         )
 
     def to_dict(self) -> dict[str, Any]:

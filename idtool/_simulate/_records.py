@@ -1,18 +1,22 @@
 """The simulator's typed records of the registered parts: one frozen dataclass per
-friction law, coupling law and actuator model, made from the part's
+friction law, coupling law, actuator model and noise model, made from the part's
 ``truth_fields`` (:mod:`idtool._model._truth_fields`).
 
 A bench's ``contact`` is the record of its friction law (``DahlParams`` with
 ``friction_coefficient`` and ``contact_stiffness_n_m``), its ``coupling`` that of its
 coupling law (``PowerLimitedCouplingParams`` with ``gain`` and ``power_load_n``), its
-``actuator`` that of its actuator model: each holds exactly its part's numbers, and
-builds the part (:meth:`ContactParams.law_at`, :meth:`CouplingParams.coupling`,
-:meth:`ActuatorParams.actuator`). A part registered later (a test's toy coupling law)
+``actuator`` that of its actuator model, its optional ``block_mean_noise`` that of a
+noise model (``AR1NoiseParams`` with ``sigma_n`` and ``phi``): each holds exactly its
+part's numbers, and builds the part (:meth:`ContactParams.law_at`,
+:meth:`CouplingParams.coupling`, :meth:`ActuatorParams.actuator`,
+:meth:`BlockNoiseParams.noise`). A part registered later (a test's toy coupling law)
 gets its record on first use, so the simulator has no list of parts of its own.
 
 The file names the parts by their registered names; a coupling law of the fit's registry
 with ``_`` for ``-`` (``power_limited``, as the files had it before the registries), and
-the simulator's truth-only laws (:mod:`idtool._simulate._truth_coupling`) beside them.
+the simulator's truth-only laws (:mod:`idtool._simulate._truth_coupling`) beside them;
+a noise model by its registered name as is (``ar1-student-t``, as ``idtool fit --noise``
+takes it).
 """
 
 from __future__ import annotations
@@ -29,10 +33,12 @@ from idtool._model._actuator import ACTUATORS, AbstractActuator
 from idtool._model._coupling import COUPLINGS, AbstractCoupling
 from idtool._model._laws import FRICTION_LAWS, AbstractFrictionLaw
 from idtool._model._names import DEFAULT_ACTUATOR
+from idtool._model._noise import NOISE_MODELS, AbstractNoise
 from idtool._simulate._truth_coupling import TRUTH_ONLY_COUPLINGS
 
 __all__ = [
     "ActuatorParams",
+    "BlockNoiseParams",
     "ContactParams",
     "CouplingParams",
     "actuator_models",
@@ -41,6 +47,8 @@ __all__ = [
     "coupling_laws",
     "coupling_record",
     "friction_laws",
+    "noise_models",
+    "noise_record",
 ]
 
 
@@ -109,6 +117,20 @@ class ActuatorParams(_PartParams):
         return self.part.from_truth(self.values())
 
 
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class BlockNoiseParams(_PartParams):
+    """Block-mean noise drawn from the registered noise model ``model`` with its numbers
+    (``sigma_n`` [N], the innovation scale, and the model's own), added on the fit's
+    blocks (:mod:`idtool._simulate._block_noise`)."""
+
+    part: ClassVar[type[AbstractNoise]]
+    model: str
+
+    def noise(self) -> AbstractNoise:
+        """The noise model (stateless: its numbers are :meth:`values`)."""
+        return self.part()
+
+
 def friction_laws() -> dict[str, type[AbstractFrictionLaw]]:
     """The friction laws the simulator simulates, by file name."""
     return {name: FRICTION_LAWS.get(name) for name in FRICTION_LAWS}
@@ -124,6 +146,12 @@ def coupling_laws() -> dict[str, type[AbstractCoupling]]:
 def actuator_models() -> dict[str, type[AbstractActuator]]:
     """The actuator models the simulator simulates, by file name."""
     return {name: ACTUATORS.get(name) for name in ACTUATORS}
+
+
+def noise_models() -> dict[str, type[AbstractNoise]]:
+    """The noise models the simulator draws block-mean noise from, by file name (the
+    registered name)."""
+    return {name: NOISE_MODELS.get(name) for name in NOISE_MODELS}
 
 
 @functools.cache
@@ -177,6 +205,14 @@ def actuator_record(section: Mapping[str, Any]) -> ActuatorParams:
     return _build(ActuatorParams, model, {"model": name}, section)  # type: ignore[return-value]
 
 
+def noise_record(section: Mapping[str, Any]) -> BlockNoiseParams:
+    """The block-noise record of a file's ``block_mean_noise`` section (checked by the
+    schema)."""
+    name = section["model"]
+    model = _choose(noise_models(), name, "noise model")
+    return _build(BlockNoiseParams, model, {"model": name}, section)  # type: ignore[return-value]
+
+
 def _choose(parts: Mapping[str, type[Any]], name: str, kind: str) -> type[Any]:
     try:
         return parts[name]
@@ -191,6 +227,7 @@ def __getattr__(name: str) -> type[_PartParams]:
         (ContactParams, friction_laws()),
         (CouplingParams, coupling_laws()),
         (ActuatorParams, actuator_models()),
+        (BlockNoiseParams, noise_models()),
     )
     for base, parts in kinds:
         for part in parts.values():

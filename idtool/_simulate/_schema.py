@@ -1,13 +1,13 @@
 """The JSON Schema of the simulator's parameter file, made from the registries.
 
-The ``contact``, ``coupling`` and ``actuator`` sections list the registered friction
-laws, coupling laws (the fit's and the simulator's truth-only ones) and actuator models,
-each with its own fields (its ``truth_fields``): one ``if``/``then`` block per part
-requires its fields and refuses every other part's, so a bad file gets located messages
-(:func:`idtool._data._schema.schema_problems`). The other sections are fixed here.
-``datasets_schema/simulator_params.schema.json`` is this function's output for the
-shipped parts (``tests/test_simulator_schema.py`` checks they are equal; ``python -m
-idtool._simulate._schema`` rewrites the file).
+The ``contact``, ``coupling``, ``actuator`` and ``block_mean_noise`` sections list the
+registered friction laws, coupling laws (the fit's and the simulator's truth-only ones),
+actuator models and noise models, each with its own fields (its ``truth_fields``): one
+``if``/``then`` block per part requires its fields and refuses every other part's, so a
+bad file gets located messages (:func:`idtool._data._schema.schema_problems`). The other
+sections are fixed here. ``datasets_schema/simulator_params.schema.json`` is this
+function's output for the shipped parts (``tests/test_simulator_schema.py`` checks they
+are equal; ``python -m idtool._simulate._schema`` rewrites the file).
 """
 
 from __future__ import annotations
@@ -15,11 +15,11 @@ from __future__ import annotations
 import copy
 import json
 import sys
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from idtool._model._names import DEFAULT_ACTUATOR
-from idtool._simulate._records import actuator_models, coupling_laws, friction_laws
+from idtool._simulate._records import actuator_models, coupling_laws, friction_laws, noise_models
 from idtool._simulate._schema_fixed import FIXED, LEVEL_CREEP, PULL_START
 
 __all__ = ["schema_text", "simulator_params_schema"]
@@ -31,6 +31,11 @@ def _summary(part: type[Any]) -> str:
     return " ".join(doc.replace("``", "").split()).rstrip(".")
 
 
+def _noise_summary(model: type[Any]) -> str:
+    """A noise model's words: its ``description`` (the report's), else its docstring's."""
+    return str(getattr(model, "description", "")) or _summary(model)
+
+
 def _section(
     parts: Mapping[str, type[Any]],
     kind: str,
@@ -39,12 +44,14 @@ def _section(
     common: Mapping[str, Any],
     required: tuple[str, ...],
     default: str | None = None,
+    summary: Callable[[type[Any]], str] = _summary,
 ) -> dict[str, Any]:
     """One section: the ``kind`` field naming the part, the ``common`` fields, every
     part's own fields, and per part an ``if``/``then`` requiring its own fields and
-    refusing the others' (``default``: the part when the file leaves ``kind`` out)."""
+    refusing the others' (``default``: the part when the file leaves ``kind`` out;
+    ``summary``: a part's words in the ``kind`` field's description)."""
     own = {name: part.truth_fields() for name, part in parts.items()}
-    names = " ".join(f"'{name}': {_summary(part)}." for name, part in parts.items())
+    names = " ".join(f"'{name}': {summary(part)}." for name, part in parts.items())
     kind_schema: dict[str, Any] = {
         "enum": list(parts),
         "description": f"{kind_description} {names}",
@@ -113,6 +120,26 @@ def simulator_params_schema() -> dict[str, Any]:
         {"pull_start_s": PULL_START},
         ("pull_start_s",),
         default=DEFAULT_ACTUATOR,
+    )
+    properties["block_mean_noise"] = _section(
+        noise_models(),
+        "model",
+        "Noise model of the block means (registered in idtool._model._noise.NOISE_MODELS, "
+        "named as 'idtool fit --noise' takes it).",
+        "Optional: noise added to the block means, drawn from a registered noise model, "
+        "on top of the load cell's sample-rate noise. The traces are cut into the fit's "
+        "blocks (2 whole periods of the mains the fit would use: rig.mains_frequency_hz, "
+        "else the hum found in the traces, else 50 Hz) and each block's drawn value [N] is "
+        "added to every sample of the block, so each block mean moves by exactly that "
+        "value (after the ADC's quantisation). Its fields are the model's parameters "
+        "under the names the fit reports: sigma_n [N] the innovations' scale (the block "
+        "means' sd for independent Gaussian noise; for AR(1) their stationary sd is "
+        "sigma_n / sqrt(1 - phi^2)), then the model's own. Drawn from a random stream "
+        "of the seed's own, after every trace's, so the traces' other noise is unchanged; "
+        "omitted, no block-mean noise.",
+        {},
+        (),
+        summary=_noise_summary,
     )
     return schema
 

@@ -26,7 +26,7 @@ FIXED: dict[str, Any] = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
     "$id": "urn:idtool:schema:simulator-params:1",
     "title": "idtool bench simulator parameters, version 1",
-    "description": "Input of 'idtool simulate-bench': the true contact and coupling, the actuator, the horn switching, the load cell's noise and the experiment matrix. SI units; every field name ends in its unit (dimensionless ones excepted). The fields of the fit's own model are required, so a file documents the whole simulation; the fields marked optional add departures of the bench from that model (pull-to-pull scatter, a lagging actuator, load-cell offset drift, a coupling law the fit does not ship, a horn fading within its ON windows, a creeping friction level), and their defaults (no departure) reproduce a file without them bit for bit.",
+    "description": "Input of 'idtool simulate-bench': the true contact and coupling, the actuator, the horn switching, the load cell's noise and the experiment matrix. SI units; every field name ends in its unit (dimensionless ones excepted). The fields of the fit's own model are required, so a file documents the whole simulation; the fields marked optional add departures of the bench from that model (pull-to-pull scatter, a lagging actuator, load-cell offset drift, a coupling law the fit does not ship, a horn fading within its ON windows, a creeping friction level) or noise of the block means drawn from a registered noise model (block_mean_noise), and their defaults (no departure, no block-mean noise) reproduce a file without them bit for bit.",
     "type": "object",
     "required": [
         "params_version",

@@ -13,7 +13,9 @@ Optional departures from the fit's model (:mod:`idtool._simulate._params`): pull
 scatter of FR and mu, a rate-limited first-order-lag actuator
 (:class:`idtool._model._actuator.LagActuator`), a linear drift of the offset, a
 truth-only coupling law (:mod:`idtool._simulate._truth_coupling`), a horn fading within
-its ON windows and a creeping friction level (:mod:`idtool._simulate._plateau_drift`).
+its ON windows and a creeping friction level (:mod:`idtool._simulate._plateau_drift`);
+and noise of the block means drawn from a registered noise model
+(:mod:`idtool._simulate._block_noise`, from the seed's child after every trace's).
 Their random draws
 come from one child stream of the trace's stream (``rng.spawn(1)``), which leaves the
 trace's own stream untouched: with the departures off the output is bit for bit what it
@@ -43,6 +45,7 @@ from idtool._data._write import document, json_bytes, render_table, trace_entry,
 from idtool._errors import IdtoolError
 from idtool._model._actuator import AbstractActuator
 from idtool._model._bench import TraceTiming, on_contact
+from idtool._simulate._block_noise import add_block_noise
 from idtool._simulate._noise import ar1_noise, mains_hum, quantise, white_noise
 from idtool._simulate._params import BenchParams
 from idtool._simulate._plateau_drift import on_force_end_n, with_plateau_drifts
@@ -335,7 +338,8 @@ def simulate_bench(
     points = _operating_point_truths(p, plan)
     files: dict[str, bytes] = {}
     entries, truths = [], []
-    for point, rng in zip(plan, np.random.default_rng(seed).spawn(len(plan)), strict=True):
+    root = np.random.default_rng(seed)
+    for point, rng in zip(plan, root.spawn(len(plan)), strict=True):
         op = points[(point.normal_load_n, point.amplitude_fraction, point.pull_speed_m_s)]
         truth, time_s, force_n, flags = _simulate_trace(p, point, op, rng)
         file = f"traces/{point.id}{suffix}"
@@ -355,7 +359,11 @@ def simulate_bench(
         f"the true parameters are in {TRUTH_FILE}."
     )
     doc = json_bytes(document(p.name, p.material, p.rig, entries, description))
-    dataset = dataset_from_bytes(doc, files, label=f"simulated dataset (seed {seed})")
+    label = f"simulated dataset (seed {seed})"
+    dataset = dataset_from_bytes(doc, files, label=label)
+    if p.block_mean_noise is not None:
+        # the root's next child: no trace's stream, so the rest of the noise is unchanged
+        dataset = add_block_noise(dataset, p.block_mean_noise, root.spawn(1)[0], label)
     return dataset, BenchTruth(seed, p, tuple(truths), dataset.sha256, tuple(points.values()))
 
 
