@@ -109,6 +109,28 @@ def example_default_run():
     return fit_dataset(idtool.load_dataset(idtool.example_dataset_path()), seed=0)
 
 
+@pytest.fixture(scope="session")
+def readme_run(tmp_path_factory) -> tuple[dict, Path]:
+    """The README's Python API script, as printed (fit, report, save, sample until
+    converged with seed 0, save_posterior, predict, amplitude_for), run once in a folder
+    of its own: its namespace and that folder. Read by tests/test_api.py (the script
+    runs with public names) and tests/test_sample_until_converged.py (its chain, the
+    example's uninterrupted default one, is what a stopped and resumed ``idtool sample``
+    must equal bit for bit): the example's default chain runs once for both (6,400
+    steps; it ran once more before)."""
+    text = (Path(__file__).parents[1] / "README.md").read_text()
+    code = text.split("## Python API")[1].split("```python\n")[1].split("```")[0]
+    folder = tmp_path_factory.mktemp("readme")
+    scope: dict = {"__readme_code__": code}
+    here = os.getcwd()
+    os.chdir(folder)
+    try:
+        exec(compile(code, "README.md", "exec"), scope)
+    finally:
+        os.chdir(here)
+    return scope, folder
+
+
 # --- xdist: which worker takes what, and in which order ---------------------------------
 #
 # ``--dist loadfile`` (the Makefile's) gives each worker whole units, in the order they

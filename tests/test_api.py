@@ -37,20 +37,13 @@ def test_readme_and_notebooks_use_public_names_only():
         assert hits == [], (path.name, hits)
 
 
-def readme_script() -> str:
-    text = (ROOT / "README.md").read_text()
-    section = text.split("## Python API")[1]
-    return section.split("```python\n")[1].split("```")[0]
-
-
 @pytest.mark.slow
-def test_readme_script_runs_with_public_names(tmp_path, monkeypatch):
-    """The README's fit -> report -> sample -> predict -> amplitude script, as printed."""
-    code = readme_script()
+def test_readme_script_runs_with_public_names(readme_run):
+    """The README's fit -> report -> sample -> predict -> amplitude script, as printed
+    (run by the session's fixture, tests/conftest.py, in a folder of its own)."""
+    scope, tmp_path = readme_run
+    code = scope["__readme_code__"]
     assert len([line for line in code.splitlines() if line.strip()]) <= 12
-    monkeypatch.chdir(tmp_path)
-    scope: dict = {}
-    exec(compile(code, "README.md", "exec"), scope)
     fit, pred, need = scope["fit"], scope["pred"], scope["need"]
     assert isinstance(fit, idtool.Fit) and fit.posterior is not None
     assert isinstance(pred, idtool.Predictions) and pred.source == "posterior"

@@ -56,8 +56,13 @@ class PeakAndPlateaus(eqx.Module):
 
 
 def _fn(target):
+    # compiled once per batch shape: run op by op, the chains of
+    # test_walkers_gathered_in_the_peak_find_the_plateaus_mass_again spent ~40 s in
+    # JAX's dispatch of a 2-D density
+    log_post = eqx.filter_jit(lambda t, x: t.log_posterior_batch(x))
+
     def fn(x):
-        return np.asarray(target.log_posterior_batch(jnp.asarray(np.atleast_2d(x))))
+        return np.asarray(log_post(target, jnp.asarray(np.atleast_2d(x))))
 
     return fn
 
