@@ -192,7 +192,7 @@ class Fit:
     # ------------------------------------------------------------------ posterior
     def sample(
         self,
-        walkers: int = 32,
+        walkers: int | None = None,
         steps: int | None = None,
         seed: int = 0,
         *,
@@ -209,9 +209,11 @@ class Fit:
         per-trace nuisances integrated out); kept on the fit, so :meth:`predict` uses it
         from then on. Without ``steps`` it samples until the chain has converged (the
         rule in ``Posterior.diagnostics``), bounded by ``max_steps`` and ``max_minutes``;
-        ``steps`` runs a fixed length instead. ``chain_path`` checkpoints the chain
-        (``chain.h5``) every ``checkpoint_s`` seconds; ``resume`` continues it. The same
-        seed gives the same chain."""
+        ``steps`` runs a fixed length instead. ``walkers``: the ensemble's size (default
+        16 on the levels model's posterior, 32 on the traces' own:
+        :func:`idtool._posterior._sample.default_walkers`). ``chain_path`` checkpoints
+        the chain (``chain.h5``) every ``checkpoint_s`` seconds; ``resume`` continues
+        it. The same seed gives the same chain."""
         sampled = sample_posterior(
             self,
             walkers=walkers,

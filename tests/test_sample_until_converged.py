@@ -20,7 +20,7 @@ from idtool._fit._folder import SAMPLE_JSON
 from idtool._posterior._chainfile import read_chain
 from idtool._posterior._diagnostics import RULE, diagnose
 from idtool._posterior._runner import FIRST_CHECK, ChainStore, run_chain
-from idtool._posterior._sample import _moves
+from idtool._posterior._sample import LEVELS_WALKERS, WALKERS, _moves, default_walkers
 
 NAMES = ("a", "b", "c", "d")
 # a correlated 4-D Gaussian (correlations up to 0.95, sds over two decades)
@@ -154,6 +154,7 @@ def test_a_default_sample_of_a_default_fit_converges(sampled, readme_run):
     the command line's, stopped by ``--max-steps`` at the first check and resumed,
     continues the same chain, bit for bit, to the same stop."""
     post = readme_run[0]["post"]
+    assert post.chain.shape[1] == LEVELS_WALKERS  # the levels posterior's default ensemble
     straight = post.diagnostics
     assert straight.converged and straight.stopped_by == "converged"
     assert post.chain.shape[0] == straight.steps >= FIRST_CHECK
@@ -212,3 +213,13 @@ def test_the_examples_default_report_opens_without_a_red_banner(sampled, tmp_pat
     assert main(["report", str(folder), "--targets", "30,50"]) == 0
     head = (folder / "report.html").read_text().split('<section id="answer">')[0]
     assert head.count('class="banner"') >= 1 and "Extrapolated answer: amplitude" in head
+
+
+def test_the_default_ensemble_is_smaller_on_the_levels_posterior_alone():
+    """16 walkers on the levels model's posterior (a step costs in proportion to the
+    ensemble, its autocorrelation time in steps barely changes: idtool._posterior._sample),
+    32 on the traces' own posterior; never below 2 ndim + 2."""
+    assert default_walkers("levels", 7) == LEVELS_WALKERS == 16
+    assert default_walkers("ar1", 8) == WALKERS == 32
+    assert default_walkers("levels", 9) == 20
+    assert default_walkers("ar1", 20) == 42

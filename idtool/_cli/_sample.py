@@ -101,7 +101,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "posterior.nc (ArviZ InferenceData), sample.json, report_sample.txt and ppc.png.",
     )
     p.add_argument("fit", help="fit folder written by 'idtool fit', e.g. fits/NAME")
-    p.add_argument("--walkers", type=_positive_int, help="walkers (default 32)")
+    p.add_argument(
+        "--walkers",
+        type=_positive_int,
+        help="walkers (default 16 on the levels model, 32 with --noise or --variability off)",
+    )
     p.add_argument(
         "--steps",
         type=_positive_int,

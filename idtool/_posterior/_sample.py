@@ -78,7 +78,33 @@ from idtool._posterior._ridge import (
 from idtool._posterior._runner import FIRST_CHECK, MAX_MINUTES, MAX_STEPS, ChainStore, run_chain
 from idtool._posterior._start import find_start, initial_walkers, start_within
 
-__all__ = ["CHAIN_FILE", "LogPosterior", "sample_posterior"]
+__all__ = [
+    "CHAIN_FILE",
+    "LEVELS_WALKERS",
+    "WALKERS",
+    "LogPosterior",
+    "default_walkers",
+    "sample_posterior",
+]
+
+# The ensemble's default size (issue 26). A walker's autocorrelation time in steps
+# depends little on the ensemble's size while a step costs in proportion to it, so the
+# levels posterior converges sooner with fewer walkers. Measured on fixed-length chains
+# (16,000 steps, two sampler seeds each; on the ridge benches 24,000 steps, one seed;
+# 2 cores): emcee's integrated time of the slowest parameter, and ms per step:
+#
+#   bench                          16 walkers              32 walkers
+#   example                        tau 129, 127; 2.50 ms   tau 115, 142; 4.61 ms
+#   clean 1                        tau 144, 136; 2.48 ms   tau 114, 106; 4.49 ms
+#   coupling 501 (along a ridge)   tau 527; 2.80 ms        tau 529; 4.54 ms
+#   all 602 (along a ridge)        tau 496; 2.59 ms        tau 439; 4.50 ms
+#
+# 50 tau of steps, the rule's chain length, then take 16.0 against 29.4 s on the
+# example, 17.3 against 24.8 s on clean 1, 74 against 120 s and 64 against 99 s on the
+# ridge benches; the bulk ESS the rule also asks for is 16 x 50 = 800 >= 400. On the
+# traces' own (noise-only) posterior, not measured, 32 as before.
+LEVELS_WALKERS = 16
+WALKERS = 32
 
 CHAIN_FILE = CHAIN_H5.name
 
@@ -128,6 +154,13 @@ def _fingerprint(fit: FitLike) -> str:
     for a in (fit.z, *covariance_state(fit.cov_z).values(), state if state.size else np.zeros(1)):
         h.update(np.ascontiguousarray(a, dtype=float).tobytes())
     return h.hexdigest()
+
+
+def default_walkers(noise: str, ndim: int) -> int:
+    """The ensemble's size when none is given: :data:`LEVELS_WALKERS` on the levels
+    model's posterior, :data:`WALKERS` on the traces' own (noise-only) posterior; at
+    least ``2 ndim + 2``, the differential-evolution move's minimum (ter Braak 2006)."""
+    return max(LEVELS_WALKERS if noise == LEVELS else WALKERS, 2 * ndim + 2)
 
 
 def _settings(fit: FitLike, params, priors, noise, walkers, seed) -> dict:
@@ -214,7 +247,8 @@ def sample_posterior(
 
     Args:
         fit: what sampling needs of a fit (:class:`~idtool._posterior._record.FitLike`).
-        walkers: ensemble size (default 32).
+        walkers: ensemble size (default :func:`default_walkers`: 16 on the levels
+            model's posterior, 32 on the traces' own).
         steps: total chain length (a resumed chain is continued up to ``steps``); ``None``
             (the default) samples until the chain has converged
             (:data:`idtool._posterior._diagnostics.RULE`; :mod:`idtool._posterior._runner`),
@@ -246,9 +280,9 @@ def sample_posterior(
             raise IdtoolError(
                 f"{chain_file}: sampled from another fit; start over without --resume"
             )
-    walkers = 32 if walkers is None else walkers
     seed = 0 if seed is None else seed
     ndim = len(params)
+    walkers = default_walkers(noise, ndim) if walkers is None else walkers
     if walkers < 2 * ndim + 2 or walkers % 2:
         raise IdtoolError(
             f"{walkers} walkers for {ndim} parameters: give an even number above {2 * ndim}"
