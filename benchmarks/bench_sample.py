@@ -23,10 +23,15 @@ that one on the example: 21.5 s in all on 2 cores, 2026-11-24).
   ESS/s = ESS per step / seconds per step.
 
 First: the default posterior (the levels model's) with the moves before and after issue
-26 and a default run until converged (:func:`levels_moves`). Also: the default stretch
-move against idtool's moves (32 x 3000 each; skip with ``--quick``), and a cross-check
-of the two log-posteriors at 8 points (must agree to 0.2: the contact solvers differ by
-~1e-5 in FR, which moves the log-posterior by up to ~0.1).
+26 and a default run until converged (:func:`levels_moves`), then the ensemble's size on
+it, 16 walkers (the default since issue 26) against 32 (:func:`ensemble_sizes`). Also:
+the default stretch move against idtool's moves (32 x 3000 each; skip with ``--quick``),
+and a cross-check of the two log-posteriors at 8 points (must agree to 0.2: the contact
+solvers differ by ~1e-5 in FR, which moves the log-posterior by up to ~0.1).
+
+Measured 2026-11-27 (2 cores, one busy with a study), :func:`ensemble_sizes`: 16 walkers
+tau 129 (discrepancy_fr), 2.54 ms/step, 50 tau in 16.4 s; 32 walkers tau 115, 4.23
+ms/step, 24.3 s.
 
 Targets (issue 5): 32 x 3000 on the example in under 2 minutes on 2 cores; ESS/s at
 least 30x the non-vectorised SciPy run.
@@ -270,9 +275,33 @@ def levels_moves(steps: int = 4000) -> None:
         )
     d = until.diagnostics
     print(
-        f"until converged: {d.steps} steps, {until.timing['total_s']:.1f} s in all "
-        f"(compile {until.timing['compile_s']:.1f} s), stopped by {d.stopped_by}"
+        f"until converged: {d.steps} steps x {until.chain.shape[1]} walkers, "
+        f"{until.timing['total_s']:.1f} s in all (compile {until.timing['compile_s']:.1f} s), "
+        f"stopped by {d.stopped_by}"
     )
+    ensemble_sizes(fit)
+
+
+def ensemble_sizes(fit, steps: int = 16000, burn: int = 2000) -> None:
+    """The ensemble's size on the levels posterior (issue 26; the default,
+    ``idtool._posterior._sample.LEVELS_WALKERS``): a fixed-length chain of 16 and of 32
+    walkers, the slowest parameter's integrated autocorrelation time in steps (emcee's,
+    after ``burn`` steps), the cost of a step, and what 50 tau of steps (the rule's
+    chain length) take."""
+    import emcee
+
+    print()
+    print(f"ensemble size, levels posterior, {steps} steps each (tau after {burn}):")
+    print(f"{'walkers':>8}{'slowest':>16}{'tau':>7}{'ms/step':>9}{'50 tau [s]':>12}")
+    for walkers in (16, 32):
+        post = fit.sample(walkers=walkers, steps=steps, seed=0)
+        tau = emcee.autocorr.integrated_time(post.chain[burn:], quiet=True)
+        ms = 1000.0 * post.timing["sampling_s"] / steps
+        slowest = post.names[int(np.argmax(tau))]
+        print(
+            f"{walkers:8d}{slowest:>16}{np.max(tau):7.0f}{ms:9.2f}"
+            f"{50.0 * np.max(tau) * ms / 1000.0:12.1f}"
+        )
 
 
 def main() -> None:
