@@ -86,9 +86,13 @@ def test_the_levels_posterior_has_every_group_arviz_needs(levels):
     loads = idata.constant_data["normal_load_n"].values
     assert sorted(set(loads.tolist())) == [270.0, 670.0]
 
-    loo = az.loo(idata)
+    # a short chain (160 steps): PSIS may say a left-out trace moves the posterior
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        loo = az.loo(idata, pointwise=True)
+        compared = az.compare({"a": idata, "b": idata})
     assert loo.n_data_points == 8 and np.isfinite(loo.elpd_loo)
-    compared = az.compare({"a": idata, "b": idata})
+    assert loo.warning == bool(np.any(loo.pareto_k.values > 0.7))
     assert list(compared["elpd_diff"]) == [0.0, 0.0]
     import matplotlib
 
@@ -211,8 +215,19 @@ def test_chain_h5_says_how_its_internal_scale_maps_to_physical_units(levels):
         "centre + scale z": lambda z, t: t["centre"] + t["scale"] * z,
     }
     assert [t["name"] for t in settings["transforms"]] == settings["names"]
+    # the walkers' coordinates to the internal scale first: the discrepancy's funnel
+    # opened (its record's formula), where the fit has one
+    chain = chain[burn:][steps]
+    funnel = settings.get("funnel")
+    if funnel is not None:
+        t = settings["transforms"][funnel["sd_index"]]
+        f = np.sqrt(
+            1.0 + (formulas[t["value"]](chain[..., funnel["sd_index"]], t) / funnel["delta0"]) ** 2
+        )
+        for j, c in zip(funnel["scaled"], funnel["centre"], strict=True):
+            chain[..., j] = c + f * (chain[..., j] - c)
     for i, t in enumerate(settings["transforms"]):
-        z = chain[burn:][steps, :, i].T  # (walkers, steps) as posterior.nc
+        z = chain[:, :, i].T  # (walkers, steps) as posterior.nc
         physical = formulas[t["value"]](z, t)
         np.testing.assert_allclose(physical, idata.posterior[t["name"]].values, rtol=1e-12)
         assert t["unit"] == idata.posterior[t["name"]].attrs["units"]

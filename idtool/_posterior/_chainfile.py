@@ -6,7 +6,10 @@ The layout is emcee's ``HDFBackend`` (group ``mcmc``: ``chain``, ``log_prob``,
 attribute ``idtool_settings`` (JSON) records what was sampled, to refuse resuming a
 chain under other settings, and, under ``transforms``, how each column of the chain
 (internal scale ``z``) maps to physical units: a formula in ``z`` and the parameter's
-``lo``/``hi`` (or ``centre``/``scale``), with its unit (:meth:`idtool.Param.transform`);
+``lo``/``hi`` (or ``centre``/``scale``), with its unit (:meth:`idtool.Param.transform`),
+after the walkers' own coordinates are mapped to that internal scale: under ``ridge``
+(sampled along a profile, :mod:`idtool._posterior._ridge`) or ``funnel`` (the
+discrepancy's funnel opened, :mod:`idtool._posterior._funnel`), each with its formula;
 and its dataset ``idtool_linearisation`` the parameter vector at which the nuisances
 were linearised (:mod:`idtool._posterior._start`), so a resumed chain
 samples exactly the same target.

@@ -46,6 +46,7 @@ from idtool._fit._variability import SD_PARAMS
 from idtool._model._benchmodel import BenchModel
 from idtool._model._noise import NOISE_MODELS
 from idtool._posterior._chainfile import last_state, read_linearisation, read_settings
+from idtool._posterior._funnel import FunnelTarget, open_funnel
 from idtool._posterior._levels import (
     SD_PRIOR,
     LevelsTarget,
@@ -122,7 +123,7 @@ class LogPosterior:
     call; the first call's compilation time is kept in ``compile_s``.
     """
 
-    def __init__(self, target: Target | LevelsTarget | RidgeTarget, batch: int):
+    def __init__(self, target: Target | LevelsTarget | RidgeTarget | FunnelTarget, batch: int):
         self.target = target
         self.batch = batch
         self.compile_s: float | None = None
@@ -296,7 +297,8 @@ def sample_posterior(
     started = time.perf_counter()
     warnings: tuple[str, ...] = ()
     one_sided: dict[str, str] = {}  # the sides the data alone bound (_ridge.open_sides)
-    sheared: RidgeTarget | None = None  # sampled along a ridge (_ridge.RidgeTarget)
+    # sampled along a ridge (_ridge.RidgeTarget) or with the funnel opened (_funnel)
+    sheared: RidgeTarget | FunnelTarget | None = None
     if done == 0 and noise == LEVELS:
         free, sds = fit.levels
         levels_target = build_levels_target(fit.model, free, table)
@@ -314,6 +316,12 @@ def sample_posterior(
             fn = LogPosterior(sheared, _batch(walkers, noise))
             theta, cov = ridge_walkers(ridge, capped, walkers, rng)
             theta = np.asarray(sheared.from_internal(jnp.asarray(theta)))
+        else:  # the discrepancy's funnel opened (_funnel.FunnelTarget), if it has one
+            funnel = open_funnel(levels_target, fn, theta, k)
+            if funnel is not None:
+                sheared = funnel
+                theta, cov = funnel.sheared_start(theta, cov)
+                fn = LogPosterior(funnel, _batch(walkers, noise))
         mode_s = time.perf_counter() - started
         p0 = initial_walkers(theta, cov, fn, walkers, rng, levels_target.params)
         initial: Any = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
@@ -334,6 +342,8 @@ def sample_posterior(
             assert stored is not None
             if stored.get("ridge"):  # sampled along a ridge (_ridge.RidgeTarget)
                 sheared = RidgeTarget.from_doc(levels_target, stored["ridge"])
+            elif stored.get("funnel"):  # the funnel opened (_funnel.FunnelTarget)
+                sheared = FunnelTarget.from_doc(levels_target, stored["funnel"])
             fn = LogPosterior(
                 sheared if sheared is not None else levels_target, _batch(walkers, noise)
             )
@@ -343,15 +353,20 @@ def sample_posterior(
         mode_s = 0.0
     settings = _settings(fit, params, table, noise, walkers, seed)
     settings |= {"warnings": list(warnings), "one_sided": one_sided}
-    if sheared is not None:  # the chain holds sheared vectors: how to map them back
-        settings["ridge"] = sheared.to_doc()
+    if sheared is not None:  # the chain holds transformed vectors: how to map them back
+        settings["ridge" if isinstance(sheared, RidgeTarget) else "funnel"] = sheared.to_doc()
     store = ChainStore(chain_file, settings, np.asarray(z_lin))
     bar = _progress(progress, steps if steps is not None else max(done, FIRST_CHECK), done)
     start_done = done
     try:
         diag, sample_s = run_chain(
             lambda backend: emcee.EnsembleSampler(
-                walkers, ndim, fn, vectorize=True, backend=backend, moves=_moves(noise, sheared)
+                walkers,
+                ndim,
+                fn,
+                vectorize=True,
+                backend=backend,
+                moves=_moves(noise, sheared if isinstance(sheared, RidgeTarget) else None),
             ),
             initial,
             store,
