@@ -35,6 +35,7 @@ from idtool._fit._result import Estimate, FitResult
 from idtool._fit._run import FitRun
 from idtool._fit._store import write_artefact
 from idtool._model._benchmodel import BenchModel
+from idtool._plan._plan import Plan, plan_pulls
 from idtool._posterior._draws import fit_draws, stored_posterior
 from idtool._posterior._posterior import Posterior
 from idtool._posterior._record import PosteriorRecord
@@ -293,6 +294,49 @@ class Fit:
             severity="note",
             median_rise=float(np.median(rises)),
             time_constant_s=float(tau),
+        )
+
+    def plan(
+        self,
+        goal: str = "band",
+        n_pulls: int = 10,
+        *,
+        at: Sequence[tuple[float, float]] | None = None,
+        half_width: float = 0.01,
+        next_pull: bool = False,
+        rel: float = 0.05,
+        weight: float = 0.95,
+        loads_n: tuple[float, float] | None = None,
+        amplitudes: tuple[float, float] | None = None,
+        speeds_m_s: Sequence[float] | None = None,
+        on_time_s: float | None = None,
+        grid: tuple[int, int] = (10, 10),
+        max_draws: int = 2000,
+        seed: int = 0,
+    ) -> Plan:
+        """The next ``n_pulls`` pulls for a goal (:mod:`idtool._plan`): ``band`` (the FR
+        band's half-width [FR] at the operating points ``at``, (load [N], amplitude)
+        pairs, down to ``half_width``), ``laws`` (tell the coupling laws apart) or
+        ``parameters`` (every physical parameter to relative sd ``rel``), from the
+        linearised levels model; candidates on a ``grid`` of loads [N] x amplitudes
+        within ``loads_n`` and ``amplitudes`` (low, high; default the tested range).
+        Checked over the fit's draws (the posterior's if sampled). Same seed, same plan."""
+        return plan_pulls(
+            self.artefact,
+            self.draws(max_draws, seed),
+            goal,
+            n_pulls,
+            at=at,
+            half_width=half_width,
+            next_pull=next_pull,
+            rel=rel,
+            weight=weight,
+            loads_n=loads_n,
+            amplitudes=amplitudes,
+            speeds_m_s=speeds_m_s,
+            on_time_s=on_time_s,
+            grid=grid,
+            seed=seed,
         )
 
     def amplitude_for(

@@ -41,6 +41,7 @@ _COMMANDS = (
     "_validate_fit",
     "_sample",
     "_predict",
+    "_plan",
     "_report",
     "_compare",
     "_demo",
