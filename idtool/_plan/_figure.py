@@ -62,11 +62,24 @@ def plot_plan(plan, band_map: np.ndarray, traces: np.ndarray, path: Path) -> Pat
     left.set_ylim(amps.min() - 0.06 * span_a, amps.max() + 0.06 * span_a)
     left.set_xlabel("normal load [N]")
     left.set_ylabel("amplitude [fraction of maximum]")
-    left.legend(loc="best", fontsize=9, markerscale=0.6)
+    # below the map, where it hides none of it
+    left.legend(
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.16),
+        ncol=3,
+        fontsize=8,
+        markerscale=0.6,
+        frameon=False,
+    )
     n = np.arange(len(plan.values))
     right.plot(n, plan.values, "o-", color="red", label="planned (greedy)")
     right.plot(n, plan.uniform, "s--", color="grey", label="uniform grid")
-    right.axhline(plan.target, color="k", linestyle=":", label=f"target {plan.target:g}")
+    values = np.concatenate([np.asarray(plan.values, float), np.asarray(plan.uniform, float)])
+    lo, hi = float(np.min(values)), float(np.max(values))
+    if plan.target <= hi + 2.0 * (hi - lo):  # a target far above the curves would flatten them
+        right.axhline(plan.target, color="k", linestyle=":", label=f"target {plan.target:g}")
+    else:
+        right.set_title(f"target {plan.target:g}: met before any pull", fontsize=9)
     right.set_xlabel("pulls added")
     right.set_ylabel(f"expected {plan.goal} goal: {plan.unit}")
     right.legend(fontsize=9)
