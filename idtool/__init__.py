@@ -112,6 +112,8 @@ _LAZY = {
     "Amplitudes": "idtool._predict._tables",
     "Predictions": "idtool._predict._tables",
     "Validation": "idtool._predict._validation",
+    "Plan": "idtool._plan._plan",
+    "PlannedPull": "idtool._plan._plan",
     "write_report": "idtool._report._html",
     "Comparison": "idtool._report._compare",
     "compare_fits": "idtool._entry",
@@ -265,6 +267,10 @@ if TYPE_CHECKING:
         Transducer as Transducer,
         transducer_steady_state as transducer_steady_state,
         TransducerSteadyState as TransducerSteadyState,
+    )
+    from idtool._plan._plan import (
+        Plan as Plan,
+        PlannedPull as PlannedPull,
     )
     from idtool._posterior._posterior import (
         Posterior as Posterior,
