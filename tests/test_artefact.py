@@ -159,6 +159,10 @@ def test_a_posterior_sampled_from_either_is_the_same(fresh_and_loaded, tmp_path)
             from_post = post.predict(450.0, 0.5, max_draws=200)
             same(from_fit.to_dict(), from_post.to_dict())
             assert from_post.source == "posterior" and from_post[0].by_law
+            # the seed reaches the posterior's own path too (the sds' draws)
+            seeded = post.predict(450.0, 0.5, max_draws=200, seed=7)
+            same(f.predict(450.0, 0.5, max_draws=200, seed=7).to_dict(), seeded.to_dict())
+            assert seeded.to_dict() != from_post.to_dict()  # the seed matters here
         same(fresh.predict(450.0, 0.5).to_dict(), loaded.predict(450.0, 0.5).to_dict())
         texts = []
         for f, name in ((fresh, "a"), (loaded, "b")):

@@ -36,15 +36,19 @@ class Posterior(PosteriorRecord):
             return fit_draws(self.fit, self, max_draws, seed)
         return draws_from_posterior(self, self._model(), max_draws, seed=seed)
 
-    def predict(self, load_n, amplitude, speed_m_s=None, *, max_draws: int = 2000):
+    def predict(self, load_n, amplitude, speed_m_s=None, *, max_draws: int = 2000, seed: int = 0):
         """Friction ratio (median, 95% band) over loads [N] x amplitude fractions x
-        speeds [m/s] from the kept draws: :class:`idtool.Predictions`."""
-        draws = self._draws(max_draws)
+        speeds [m/s] from the kept draws: :class:`idtool.Predictions`. ``seed`` seeds
+        the discrepancy's and scatter's draws (as ``Fit.predict``'s)."""
+        draws = self._draws(max_draws, seed)
         return predict_table(draws, self._model().data, load_n, amplitude, speed_m_s)
 
-    def amplitude_for(self, reduction_percent: float, load_n, speed_m_s=None, *, max_draws=2000):
-        """The amplitude fraction for a target reduction [%]: :class:`idtool.Amplitudes`."""
-        draws = self._draws(max_draws)
+    def amplitude_for(
+        self, reduction_percent: float, load_n, speed_m_s=None, *, max_draws=2000, seed: int = 0
+    ):
+        """The amplitude fraction for a target reduction [%]: :class:`idtool.Amplitudes`;
+        ``seed`` as in :meth:`predict`."""
+        draws = self._draws(max_draws, seed)
         data = self._model().data
         return amplitude_table(draws, data, reduction_percent, load_n, speed_m_s)
 
