@@ -41,6 +41,7 @@ import numpy as np
 from jaxtyping import Array
 
 from idtool._model._params import Param
+from idtool._posterior._reparam import AbstractReparameterised
 
 __all__ = ["FUNNEL_SD", "FunnelTarget", "funnel_scale", "open_funnel"]
 
@@ -89,7 +90,7 @@ def funnel_scale(
     return math.sqrt((_WIDE**2 - ratio * _NEAR_ZERO**2) / (ratio - 1.0))
 
 
-class FunnelTarget(eqx.Module):
+class FunnelTarget(AbstractReparameterised):
     """A log-posterior on coordinates where the funnel is opened (module docstring): the
     walkers hold ``x``, ``theta_j = centre_j + f(delta) x_j`` for ``j`` in ``scaled``,
     every other coordinate as it is."""
@@ -99,18 +100,6 @@ class FunnelTarget(eqx.Module):
     scaled: tuple[int, ...] = eqx.field(static=True)
     sd_index: int = eqx.field(static=True)
     delta0: float = eqx.field(static=True)
-
-    @property
-    def params(self) -> tuple[Param, ...]:
-        return self.base.params
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        return self.base.names
-
-    @property
-    def priors(self) -> tuple[Any, ...]:
-        return self.base.priors
 
     def widening(self, x):
         """``f(delta)`` at vectors ``x`` (..., ndim): the spread's growth with the sd."""

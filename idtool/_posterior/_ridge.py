@@ -36,6 +36,7 @@ from jaxtyping import Array
 
 from idtool._fit._result import Z95, Z_AT_BOUND, one_sided
 from idtool._model._params import Param
+from idtool._posterior._reparam import AbstractReparameterised
 from idtool._posterior._ridge_jump import cell_edges, ridge_jump
 
 __all__ = [
@@ -247,7 +248,7 @@ def ridge_walkers(
     return centres, spread
 
 
-class RidgeTarget(eqx.Module):
+class RidgeTarget(AbstractReparameterised):
     """A log-posterior sampled on coordinates sheared along a :class:`Ridge`: the walkers
     hold the profiled parameter's internal value ``z`` and every other parameter's offset
     from the profile's maximising value at ``z`` (linear between the profile points,
@@ -300,14 +301,6 @@ class RidgeTarget(eqx.Module):
         """The move that redraws the profiled coordinate along the ridge
         (:func:`idtool._posterior._ridge_jump.ridge_jump`)."""
         return ridge_jump(self.index, np.asarray(self.grid), np.asarray(self.log_post))
-
-    @property
-    def params(self) -> tuple[Param, ...]:
-        return self.base.params
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        return self.base.names
 
     def _shift(self, x):
         z = x[..., self.index]

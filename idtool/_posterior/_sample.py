@@ -69,6 +69,7 @@ from idtool._posterior._prior import (
     parse_priors,
     read_priors,
 )
+from idtool._posterior._reparam import AbstractReparameterised
 from idtool._posterior._ridge import (
     RidgeTarget,
     open_sides,
@@ -123,7 +124,7 @@ class LogPosterior:
     call; the first call's compilation time is kept in ``compile_s``.
     """
 
-    def __init__(self, target: Target | LevelsTarget | RidgeTarget | FunnelTarget, batch: int):
+    def __init__(self, target: Target | LevelsTarget | AbstractReparameterised, batch: int):
         self.target = target
         self.batch = batch
         self.compile_s: float | None = None
@@ -298,7 +299,7 @@ def sample_posterior(
     warnings: tuple[str, ...] = ()
     one_sided: dict[str, str] = {}  # the sides the data alone bound (_ridge.open_sides)
     # sampled along a ridge (_ridge.RidgeTarget) or with the funnel opened (_funnel)
-    sheared: RidgeTarget | FunnelTarget | None = None
+    sheared: AbstractReparameterised | None = None
     if done == 0 and noise == LEVELS:
         free, sds = fit.levels
         levels_target = build_levels_target(fit.model, free, table)
