@@ -47,9 +47,8 @@ def with_xla_trig():
     XLA's own sine and cosine (new function objects, so JAX traces them afresh)."""
     names = {"cos": jnp.cos, "sin": jnp.sin}
     env = dict(vars(_contact), trig=types.SimpleNamespace(**names))
-    for name in ("_slip_m",):
-        fn = getattr(_contact, name)
-        env[name] = types.FunctionType(fn.__code__, env, name)
+    slip = _contact._slip_m  # its defaults are the polynomials: XLA's in the copy
+    env["_slip_m"] = types.FunctionType(slip.__code__, env, "_slip_m", (jnp.cos, jnp.sin))
     raw = _contact.prescribed_cycle_average.__wrapped__
     return jax.jit(types.FunctionType(raw.__code__, env, raw.__name__, raw.__defaults__))
 

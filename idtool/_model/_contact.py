@@ -16,13 +16,15 @@ has to be integrated away, and every output is smooth in the parameters (the gri
 with VR), so JAX gradients are well defined.
 
 Averages use the exact mean of the exponential over each step (``phi1`` below), which
-stays accurate however stiff the contact (large Lambda) is. The grid's sines and cosines
-are :mod:`idtool._model._trig`'s polynomials: XLA:CPU's own took half this kernel's time.
+stays accurate however stiff the contact (large Lambda) is. The sines and cosines with an
+element per phase step are :mod:`idtool._model._trig`'s polynomials: XLA:CPU's own took
+half this kernel's time.
 """
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 
 import equinox as eqx
 import jax
@@ -142,9 +144,9 @@ def prescribed_cycle_average(
     th0 = start + dtheta * jnp.arange(n_phase)  # step starts
     mid = th0 + 0.5 * dtheta
     slide_m = v / w  # slip per radian from the sliding alone [m]
-    du = _slip_m(slide_m, a, th0, dtheta)
+    du = _slip_m(slide_m, a, th0, dtheta, sin=jnp.sin)  # dtheta: one per stretch
     du_abs = jnp.maximum(sign * du, 0.0)  # round-off can flip sign at a reversal
-    v_mid = v + a * w * trig.cos(mid)
+    v_mid = v + a * w * jnp.cos(mid)  # used by the velocity-dependent laws only
     level = law.level_n(v_mid)
     kappa = law.decay_exponent(du_abs, level)
     target = sign * level
@@ -157,7 +159,7 @@ def prescribed_cycle_average(
             jnp.maximum(sign * _slip_m(slide_m, a, start, th0 - start), 0.0), fb_level
         )
         k_stretch = law.decay_exponent(
-            jnp.maximum(sign * _slip_m(slide_m, a, start, length), 0.0), fb_level
+            jnp.maximum(sign * _slip_m(slide_m, a, start, length, jnp.cos, jnp.sin), 0.0), fb_level
         )
         fb_start = _fb_start_constant_level(fb_level, sign, k_since, k_stretch)
     else:
@@ -180,12 +182,12 @@ def prescribed_cycle_average(
     th1 = th0 + dtheta
     s1_force = s1 * v_mid * zdot_factor
     harmonic_cos = (
-        jnp.sum(step_mean * (trig.sin(th1) - trig.sin(th0)) + s1_force * trig.cos(mid) * dtheta)
+        jnp.sum(step_mean * (jnp.sin(th1) - jnp.sin(th0)) + s1_force * jnp.cos(mid) * dtheta)
         / jnp.pi
         + s2 * a * w
     )
     harmonic_sin = (
-        jnp.sum(step_mean * (trig.cos(th0) - trig.cos(th1)) + s1_force * trig.sin(mid) * dtheta)
+        jnp.sum(step_mean * (jnp.cos(th0) - jnp.cos(th1)) + s1_force * jnp.sin(mid) * dtheta)
         / jnp.pi
     )
 
@@ -207,12 +209,24 @@ def prescribed_cycle_average(
     )
 
 
-def _slip_m(slide_m: Array, a: Array, theta0: Array, dtheta: Array) -> Array:
+def _slip_m(
+    slide_m: Array,
+    a: Array,
+    theta0: Array,
+    dtheta: Array,
+    cos: Callable[[Array], Array] = trig.cos,
+    sin: Callable[[Array], Array] = trig.sin,
+) -> Array:
     """Slip ``u(theta0 + dtheta) - u(theta0)`` [m], ``u = slide_m theta + a sin(theta)``.
 
     The sine difference is written as a product to avoid cancellation for small steps.
+    ``cos`` and ``sin``: :mod:`idtool._model._trig`'s polynomials where the argument has
+    an element per phase step (the kernel's time); XLA's own where it has one per
+    stretch, where each polynomial would only add to the program JAX traces and XLA
+    compiles (a polynomial in place of every sine and cosine of the kernel made a cold
+    fit of the example trace 1.4 s and compile 2-3 s longer).
     """
-    return slide_m * dtheta + 2.0 * a * trig.cos(theta0 + 0.5 * dtheta) * trig.sin(0.5 * dtheta)
+    return slide_m * dtheta + 2.0 * a * cos(theta0 + 0.5 * dtheta) * sin(0.5 * dtheta)
 
 
 def _fb_start_composed(kappa: Array, decay: Array, offset: Array) -> Array:
