@@ -26,6 +26,8 @@ def _run(args: argparse.Namespace) -> int:
         raise IdtoolError(f"--truths {args.truths}: give at least 1")
     if args.scheduler is None and args.workers < 1:
         raise IdtoolError(f"--workers {args.workers}: give at least 1")
+    if args.uniform and args.plan is None:
+        raise IdtoolError("--uniform needs --plan PLAN_DIR (the plan whose uniform grid to run)")
     if args.plan is not None and not (Path(args.plan) / "plan.json").is_file():
         raise IdtoolError(
             f"--plan {args.plan}: no plan.json there; give a folder 'idtool plan' wrote"
@@ -45,6 +47,7 @@ def _run(args: argparse.Namespace) -> int:
         args.truths,
         args.out,
         plan=args.plan,
+        uniform=args.uniform,
         departure=args.departure,
         sample=args.sample,
         workers=args.workers,
@@ -85,6 +88,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("fit", help="fit folder, e.g. fits/NAME")
     p.add_argument("--out", required=True, help="output folder, e.g. studies/NAME")
     p.add_argument("--plan", help="an 'idtool plan' folder: its pulls are simulated too")
+    p.add_argument(
+        "--uniform",
+        action="store_true",
+        help="simulate the plan's uniform grid of as many pulls instead of its pulls",
+    )
     p.add_argument("--truths", type=int, default=100, help="truths (fits) to run (default 100)")
     p.add_argument(
         "--departure",

@@ -58,7 +58,7 @@ def open_client(workers: int = 2, scheduler: str | None = None) -> Iterator[Any]
             n_workers=workers,
             threads_per_worker=1,
             processes=True,
-            dashboard_address=None,
+            dashboard_address=":0",  # any free port: two studies at once do not collide
             silence_logs=logging.CRITICAL,
         )
     with cluster, Client(cluster) as client:

@@ -110,6 +110,7 @@ def study(
     out: str | os.PathLike,
     *,
     plan: str | os.PathLike | None = None,
+    uniform: bool = False,
     departure: str = "clean",
     sample: bool = False,
     workers: int = 2,
@@ -133,6 +134,8 @@ def study(
             ``records.jsonl``, ``study.json``); unfinished, ``OUT.partial``.
         plan: an ``idtool plan`` folder: its pulls are simulated too, its ``at`` are the
             targets and its expected half-width is what the study checks.
+        uniform: simulate the uniform grid of as many pulls the plan is compared with
+            (``plan.json``'s ``uniform_pulls``) instead of its planned pulls.
         departure: the simulated bench's departure from the fit's model
             (:mod:`idtool._simulate._departures`; ``clean``: none, the fit's own
             assumptions with its scatter).
@@ -175,7 +178,7 @@ def study(
     points = [list(r) for r in zip(loads, amps, speeds, on_s, strict=True)]
     plan_doc = None
     if plan is not None:
-        pulls, plan_doc = plan_pulls_from_folder(plan)
+        pulls, plan_doc = plan_pulls_from_folder(plan, uniform)
         points += [
             [p.normal_load_n, p.amplitude_fraction, p.pull_speed_m_s, p.on_duration_s]
             for p in pulls
@@ -195,6 +198,7 @@ def study(
         "plan": None
         if plan_doc is None
         else hashlib.sha256(json.dumps(plan_doc, sort_keys=True).encode()).hexdigest(),
+        "uniform": bool(uniform),
         "truths": truths,
         "seed": seed,
         "departure": departure,
@@ -270,7 +274,7 @@ def study(
     records = read_records(records_path)
     if len(records) < truths:
         return Study(tuple(records), None, None)
-    expected = _expected(fit, plan_doc, targets)
+    expected = _expected(fit, plan_doc, targets, uniform)
     summary = summarise(records, expected, wall_s)
     summary["settings"] = settings
     summary["expected"] = expected
@@ -299,17 +303,18 @@ def _rig(fit: Fit) -> dict[str, Any]:
     return out
 
 
-def _expected(fit: Fit, plan_doc: dict | None, targets) -> dict[str, Any]:
+def _expected(fit: Fit, plan_doc: dict | None, targets, uniform: bool) -> dict[str, Any]:
     """The expected half-widths [FR] at the targets: the plan's value after its pulls
-    (goal band: the largest of the targets'), else today's linearised band
-    (:func:`idtool._plan._plan.band_half_widths`)."""
+    (goal band: the largest of the targets'; ``uniform``: the uniform grid's), else
+    today's linearised band (:func:`idtool._plan._plan.band_half_widths`)."""
     if plan_doc is not None and plan_doc.get("goal") == "band":
-        value = float(plan_doc["values"][-1])
+        value = float(plan_doc["uniform" if uniform else "values"][-1])
         return {
             "half_width": [value] * len(targets),
             "now": float(plan_doc["values"][0]),
             "uniform": float(plan_doc["uniform"][-1]),
-            "source": f"the plan's after its {len(plan_doc['pulls'])} pulls",
+            "source": f"the plan's after its {len(plan_doc['pulls'])} "
+            + ("uniform pulls" if uniform else "pulls"),
         }
     from idtool._plan._linear import Points
     from idtool._plan._plan import band_half_widths

@@ -148,14 +148,17 @@ def summary_text(s: dict) -> str:
         )
     lines.append(f"  {'FR (targets)':14s} {_cov_text(s['fr_coverage'])}")
     lines.append(f"FR band half-width at the targets (expected: {s['expected_source']}):")
+    lines.append("  (achieved: over the truths)")
     lines.append(
-        f"  {'load [N]':>8s} {'amp':>5s} {'expected':>9s} {'achieved':>9s} {'10-90%':>17s}"
+        f"  {'load [N]':>8s} {'amp':>5s} {'expected':>9s} {'mean':>9s}"
+        f" {'median':>9s} {'10-90%':>17s}"
     )
     for t in s["targets"]:
         exp = "-" if t["expected_half_width"] is None else f"{t['expected_half_width']:.4g}"
         lo, hi = t["half_width_10_90"]
         lines.append(
             f"  {t['at'][0]:8.1f} {t['at'][1]:5.2f} {exp:>9s} {t['half_width_mean']:9.4g} "
+            f"{t['half_width_median']:9.4g} "
             f"{lo:8.3g}-{hi:<8.3g} FR {_cov_text(t['coverage'])}"
         )
     law = s["laws"]
@@ -188,6 +191,7 @@ def plot_study(s: dict, records: list[dict], path: Path) -> None:
             ax.hlines(target["expected_half_width"], t - 0.3, t + 0.3, color="k", lw=2)
     ax.set_xticks(range(len(s["targets"])))
     ax.set_xticklabels([f"{t['at'][0]:g} N\n{t['at'][1]:g}" for t in s["targets"]], fontsize=8)
+    ax.set_yscale("log")
     ax.set_ylabel("FR band half-width [FR]")
     ax.set_title("achieved (dots) vs expected (bars)", fontsize=10)
     ax = axes[1]

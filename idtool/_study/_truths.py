@@ -145,10 +145,11 @@ def design_points(rows: Iterable[Sequence[float]], prefix: str = "t") -> list[Op
 
 
 def plan_pulls_from_folder(
-    folder: str | os.PathLike,
+    folder: str | os.PathLike, uniform: bool = False
 ) -> tuple[list[OperatingPoint], dict[str, Any]]:
     """The planned pulls of an ``idtool plan`` folder (``plan.json``) as simulated
-    traces (ids ``p000``, ...), and the plan's document.
+    traces (ids ``p000``, ...), or with ``uniform`` the uniform grid of as many pulls
+    it is compared with, and the plan's document.
 
     Raises:
         IdtoolError: no readable ``plan.json`` in ``folder``.
@@ -156,12 +157,16 @@ def plan_pulls_from_folder(
     path = Path(folder) / "plan.json"
     try:
         doc = json.loads(path.read_text())
-        pulls = doc["pulls"]
+        pulls = doc["uniform_pulls" if uniform else "pulls"]
         rows = [
             (p["normal_load_n"], p["amplitude_fraction"], p["pull_speed_m_s"], p["on_time_s"])
             for p in pulls
         ]
-    except (OSError, ValueError, KeyError, TypeError) as err:
+    except KeyError as err:
+        raise IdtoolError(
+            f"--plan {folder}: {path} has no {err}; plan again with this idtool"
+        ) from None
+    except (OSError, ValueError, TypeError) as err:
         raise IdtoolError(
             f"--plan {folder}: cannot read {path} ({err}); give a folder 'idtool plan' wrote"
         ) from None
