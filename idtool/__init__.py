@@ -123,6 +123,8 @@ _LAZY = {
     "simulate_bench": "idtool._simulate._simulate",
     "write_simulation": "idtool._simulate._simulate",
     "Fit": "idtool._workflow",
+    "Study": "idtool._study._study",
+    "study": "idtool._study._study",
     "fit": "idtool._entry",
     "load_fit": "idtool._entry",
 }
@@ -307,6 +309,10 @@ if TYPE_CHECKING:
     )
     from idtool._simulate._truth import (
         BenchTruth as BenchTruth,
+    )
+    from idtool._study._study import (
+        Study as Study,
+        study as study,
     )
     from idtool._workflow import (
         Fit as Fit,

@@ -42,6 +42,7 @@ _COMMANDS = (
     "_sample",
     "_predict",
     "_plan",
+    "_study",
     "_report",
     "_compare",
     "_demo",

@@ -82,6 +82,9 @@ class Plan:
     notes: tuple[str, ...]
     grid_shape: tuple[int, int, int]
     details: dict = dataclasses.field(default_factory=dict)
+    # the uniform grid of N pulls the plan is compared with (what idtool study --uniform
+    # simulates), value_after: the grid of that size's value (re-chosen for each size)
+    uniform_pulls: tuple[PlannedPull, ...] = ()
 
     @property
     def met(self) -> bool:
@@ -263,6 +266,12 @@ def plan_pulls(
         seed,
     )
     details = _details(goal, linear, batch)
+    uniform_pulls = tuple(
+        PlannedPull(
+            i + 1, float(mesh[c, 0]), float(mesh[c, 1]), float(mesh[c, 2]), on_s, uniform[-1]
+        )
+        for i, c in enumerate(_uniform(n_pulls, n_l, n_a, speeds.size))
+    )
     notes = (
         "linearised levels model (universal kriging) about the fit's estimate; the sds "
         f"drawn {n_sd} times from the fit's grids",
@@ -297,6 +306,7 @@ def plan_pulls(
         notes=notes,
         grid_shape=(n_l, n_a, speeds.size),
         details=details,
+        uniform_pulls=uniform_pulls,
     )
 
 
@@ -463,6 +473,7 @@ def write_plan(plan: Plan, folder, band_map: np.ndarray, traces: np.ndarray) -> 
         "bayesian": {k: list(v) for k, v in plan.bayesian.items()},
         "pulls_to_target": plan.pulls_to_target,
         "pulls": [dataclasses.asdict(p) for p in plan.pulls],
+        "uniform_pulls": [dataclasses.asdict(p) for p in plan.uniform_pulls],
         "at": [list(a) for a in plan.at],
         "details": plan.details,
         "notes": list(plan.notes),

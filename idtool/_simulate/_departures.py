@@ -56,6 +56,7 @@ __all__ = [
     "DRIFT_KINDS",
     "SHAPE_KINDS",
     "departure_params",
+    "with_departure",
 ]
 
 # The departures the fit's model options cover (the coverage studies score these).
@@ -145,6 +146,30 @@ def departure_params(kind: str, seed: int, design: str = "paper") -> BenchParams
     truth = _truth_factors(seed)
     p["contact"]["friction_coefficient"] *= truth["friction_coefficient"]
     p["contact"]["contact_stiffness_n_m"] *= truth["contact_stiffness_n_m"]
+    with_departure(p, kind, truth)
+    p["name"] = f"departures-{kind}-seed{seed}"
+    p["description"] = (
+        f"Simulated bench with departure '{kind}' from the fit's model "
+        f"(idtool._simulate._departures, seed {seed}); the truth is in true_parameters.json."
+    )
+    return BenchParams.from_dict(p, f"departure preset {kind!r}")
+
+
+def with_departure(p: dict[str, Any], kind: str, truth: dict[str, float] | None = None) -> None:
+    """Switch the departure ``kind`` on in the simulator document ``p`` (in place), at
+    the presets' sizes (module docstring); ``truth``: the seeded multipliers of the
+    coupling's gain and load scale (default 1: the coupling as ``p`` has it, or the
+    truth-only law's calibrated constants). ``"clean"`` changes nothing but the seeded
+    coupling. The simulation study applies it to a truth drawn from a fit
+    (:mod:`idtool._study`).
+
+    Raises:
+        IdtoolError: an unknown ``kind``.
+    """
+    if kind not in DEPARTURE_KINDS + DRIFT_KINDS + SHAPE_KINDS:
+        kinds = ", ".join(DEPARTURE_KINDS + DRIFT_KINDS + SHAPE_KINDS)
+        raise IdtoolError(f"departure kind {kind!r}: use one of {kinds}")
+    truth = truth or {"load_scale": 1.0, "gain": 1.0}
     on = {kind} if kind != "all" else set(ALL_KINDS)
     if "coupling" in on:
         p["coupling"] = dict(TRUTH_ONLY_COUPLING)
@@ -152,9 +177,10 @@ def departure_params(kind: str, seed: int, design: str = "paper") -> BenchParams
     elif kind == "ceiling":
         p["coupling"] = dict(CEILING_COUPLING)
         p["coupling"]["ceiling_load_n"] *= truth["load_scale"]
-    else:
+    elif "power_load_n" in p["coupling"]:
         p["coupling"]["power_load_n"] *= truth["load_scale"]
-    p["coupling"]["gain"] *= truth["gain"]
+    if "gain" in p["coupling"]:
+        p["coupling"]["gain"] *= truth["gain"]
     if "scatter" in on:
         p["scatter"] = dict(SCATTER)
     if "actuator" in on:
@@ -168,12 +194,6 @@ def departure_params(kind: str, seed: int, design: str = "paper") -> BenchParams
         p["horn_fading"] = dict(HORN_FADING)
     if "creep" in on:
         p["contact"]["level_creep_per_s"] = LEVEL_CREEP_PER_S
-    p["name"] = f"departures-{kind}-seed{seed}"
-    p["description"] = (
-        f"Simulated bench with departure '{kind}' from the fit's model "
-        f"(idtool._simulate._departures, seed {seed}); the truth is in true_parameters.json."
-    )
-    return BenchParams.from_dict(p, f"departure preset {kind!r}")
 
 
 def _truth_factors(seed: int) -> dict[str, float]:

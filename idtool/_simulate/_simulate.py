@@ -33,7 +33,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -314,9 +314,14 @@ def _operating_point_truths(
 
 
 def simulate_bench(
-    params: Mapping[str, Any] | BenchParams, seed: int
+    params: Mapping[str, Any] | BenchParams,
+    seed: int,
+    traces: Sequence[OperatingPoint] | None = None,
 ) -> tuple[Dataset, BenchTruth]:
-    """Simulate the experiment matrix of ``params`` with random seed ``seed``.
+    """Simulate the experiment matrix of ``params`` with random seed ``seed``, or the
+    ``traces`` instead of the matrix (any loads [N], amplitudes, ON durations
+    [s] and speeds [m/s], one trace each, with unique ids; the simulation study's fitted
+    design plus planned pulls, :mod:`idtool._study`).
 
     Returns the dataset exactly as :func:`idtool.load_dataset` would read it back from
     :func:`write_simulation`'s folder (same arrays, same sha256), and the truth.
@@ -327,7 +332,9 @@ def simulate_bench(
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise IdtoolError(f"seed {seed!r}: give an integer >= 0")
     p = params if isinstance(params, BenchParams) else BenchParams.from_dict(params)
-    plan = experiment_plan(p)
+    plan = experiment_plan(p) if traces is None else tuple(traces)
+    if len({point.id for point in plan}) != len(plan):
+        raise IdtoolError("the simulated traces' ids must be unique")
     samples = _total_samples(p, plan)
     if samples > MAX_SAMPLES:
         raise IdtoolError(
