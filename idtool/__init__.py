@@ -127,6 +127,11 @@ _LAZY = {
     "study": "idtool._study._study",
     "fit": "idtool._entry",
     "load_fit": "idtool._entry",
+    "Series": "idtool._data._series",
+    "read_series": "idtool._data._series",
+    "simulate_series": "idtool._simulate._series",
+    "fit_law": "idtool._lawfit._api",
+    "SeriesFit": "idtool._lawfit._result",
 }
 
 # The one list of public names: __all__ is read from it, and the TYPE_CHECKING block
@@ -168,6 +173,10 @@ if TYPE_CHECKING:
     from idtool._data._import import (
         import_daq as import_daq,
     )
+    from idtool._data._series import (
+        read_series as read_series,
+        Series as Series,
+    )
     from idtool._data._write import (
         write_dataset as write_dataset,
     )
@@ -188,6 +197,12 @@ if TYPE_CHECKING:
     )
     from idtool._fit._result import (
         Estimate as Estimate,
+    )
+    from idtool._lawfit._api import (
+        fit_law as fit_law,
+    )
+    from idtool._lawfit._result import (
+        SeriesFit as SeriesFit,
     )
     from idtool._model._actuator import (
         AbstractActuator as AbstractActuator,
@@ -302,6 +317,9 @@ if TYPE_CHECKING:
     from idtool._simulate._params import (
         BenchParams as BenchParams,
         load_bench_params as load_bench_params,
+    )
+    from idtool._simulate._series import (
+        simulate_series as simulate_series,
     )
     from idtool._simulate._simulate import (
         simulate_bench as simulate_bench,

@@ -38,6 +38,7 @@ _COMMANDS = (
     "_simulate_bench",
     "_parameters",
     "_fit",
+    "_fit_law",
     "_validate_fit",
     "_sample",
     "_predict",

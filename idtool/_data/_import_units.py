@@ -3,7 +3,7 @@
 A header names its column and, optionally, its unit: ``Time (s)``, ``Time [ms]``,
 ``Load (kN)``, ``speed mm/s``, ``t/s`` or the format's own ``time_s``, ``speed_mm_s``,
 ``amplitude_percent``. Units are looked up case-insensitively in one table per quantity,
-each unit with its factor to the SI unit of the dataset format (s, N, V, m/s, fraction).
+each unit with its factor to the SI unit of the dataset format (s, N, V, m/s, fraction, m).
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ QUANTITIES: dict[str, dict[str, float]] = {
     "voltage": {"V": 1.0, "mV": 1e-3},
     "amplitude": {"fraction": 1.0, "%": 0.01},
     "speed": {"m/s": 1.0, "mm/s": 1e-3, "cm/s": 1e-2, "m/min": 1.0 / 60.0},
+    "displacement": {"m": 1.0, "mm": 1e-3, "um": 1e-6, "nm": 1e-9},
 }
 
 # Spellings of the units above (lower case, micro sign as u) -> the unit.
@@ -57,6 +58,10 @@ _ALIASES = {
     **{a: "mm/s" for a in ("mm/s", "mm_s")},
     **{a: "cm/s" for a in ("cm/s", "cm_s")},
     **{a: "m/min" for a in ("m/min", "m_min")},
+    **{a: "m" for a in ("m", "metre", "metres", "meter", "meters")},
+    "mm": "mm",
+    **{a: "um" for a in ("um", "micron", "microns", "micrometre", "micrometer")},
+    "nm": "nm",
 }
 
 _BRACKETS = re.compile(r"(.*?)\s*[(\[{]\s*([^)\]}]*?)\s*[)\]}]")

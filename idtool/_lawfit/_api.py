@@ -1,0 +1,73 @@
+""":func:`fit_law`: the public entry point of ``idtool fit-law``."""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from idtool._data._series import Series, read_series
+from idtool._lawfit._problem import make_problem
+from idtool._lawfit._profile import profile_intervals
+from idtool._lawfit._result import SeriesFit, estimate_from_sides
+from idtool._lawfit._solve import solve
+
+__all__ = ["fit_law"]
+
+
+def fit_law(
+    series: Series | str | Path,
+    law: str = "lugre",
+    *,
+    posterior: bool = False,
+    seed: int = 0,
+) -> SeriesFit:
+    """Fit a friction law to a velocity-force series.
+
+    The law's bristle state is integrated through the series
+    (:mod:`idtool._model._series_force`: exact slip updates, model notes §4), the
+    parameters found by Levenberg-Marquardt on the force residuals from a multi-start,
+    and each physical parameter's 95% interval checked against its profile likelihood
+    (:mod:`idtool._lawfit._profile`). A parameter the series cannot inform is stated so
+    (one-sided, or not identified) instead of being given a huge standard error.
+
+    Args:
+        series: a :class:`idtool.Series`, or the path of a series file
+            (CSV or Parquet; docs/how-to/fit-law.md).
+        law: ``lugre``, ``dahl``, ``coulomb-viscous``, or any registered friction law
+            (with ``-viscous`` for an extra viscous term).
+        posterior: also sample the posterior with emcee (flat priors on the internal
+            scale's log ranges).
+        seed: of the sampler.
+
+    Returns:
+        The :class:`idtool.SeriesFit`.
+
+    Raises:
+        IdtoolError: an unreadable series (located problems) or an unknown law.
+    """
+    import jax.numpy as jnp
+
+    if not isinstance(series, Series):
+        series = read_series(series)
+    start = time.perf_counter()
+    problem = make_problem(series, law)
+    opt, lm = solve(problem)
+    n_phys = problem.n_physical
+    sides = profile_intervals(lm, opt, n_phys)
+    se_z = np.sqrt(np.diag(opt.cov_z))
+    estimates, by_name = {}, {}
+    for k in range(n_phys):
+        p = problem.params[k]
+        se = float(se_z[k]) if math.isfinite(se_z[k]) else math.inf
+        estimates[p.name] = estimate_from_sides(p, float(opt.z[k]), se, *sides[k])
+        by_name[p.name] = sides[k]
+    force = np.asarray(problem.model_force(jnp.asarray(opt.z))[0])
+    fit = SeriesFit(problem, opt, estimates, by_name, force, time.perf_counter() - start)
+    if posterior:
+        from idtool._lawfit._posterior import sample_posterior
+
+        fit = SeriesFit(**{**fit.__dict__, "posterior": sample_posterior(fit, seed=seed)})
+    return fit

@@ -1,0 +1,217 @@
+"""Levenberg-Marquardt on a series, the Gauss-Newton covariance and the AR(1) check of
+the residuals.
+
+The Jacobian is dense and narrow (a handful of parameters, thousands of samples): it is
+formed by forward-mode products through the :func:`jax.lax.scan` of the integrator, one
+per parameter, with the residuals as their primal, once per LM step. (The project's
+coloured LM, :mod:`idtool._fit._lm`, is for the bench's block-arrow structure;
+optimistix's LevenbergMarquardt took 180 ms a step here against 16 ms for the
+Jacobian itself, on 3,000 samples: 36 s for a LuGre fit.) Every solve is vmapped: the
+multi-start's best few, and the profile refits with one parameter held
+(:mod:`idtool._lawfit._profile`), run as one batch through one compiled program.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from idtool._lawfit._problem import Data, Model, Problem, batch_loss, start_grid
+
+__all__ = ["PHI_TRIGGER", "Optimum", "ar1", "levenberg_marquardt", "refit_batch", "solve"]
+
+# Whiten when the residuals' lag-1 autocorrelation exceeds this and is significant
+# (beyond 3/sqrt(n)): below 0.1 white-noise intervals are within ~10% of the AR(1) ones
+# (their width scales as sqrt((1 + phi) / (1 - phi))).
+PHI_TRIGGER = 0.1
+_BEST_STARTS = 4
+_MAX_STEPS = 200
+_RTOL = 1e-10
+# A profile refit stops once the full Gauss-Newton step would lower -2 log L by less
+# than this: its rise is then within 0.01 of the converged one, beside the 1 and 3.84 it
+# is compared with (idtool._fit._intervals.REFIT_TOL)
+REFIT_DECREMENT = 1e-2
+_MAX_STEP_Z = 1.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Optimum:
+    """The optimum: internal ``z``, residual variance, covariance of z, AR(1) state.
+
+    Attributes:
+        z: (p,) internal values.
+        cov_z: (p, p) covariance of z (Gauss-Newton, whitened), ``inf`` on the diagonal
+            of a parameter the data do not move at all.
+        rss: whitened residual sum of squares (scaled units).
+        sigma2: its variance per sample, ``rss / (n - p)`` (scaled units).
+        phi: the AR(1) coefficient used (0: white).
+        phi_white: the lag-1 autocorrelation of the white fit's residuals.
+        steps: LM steps of the final solve.
+    """
+
+    z: np.ndarray
+    cov_z: np.ndarray
+    rss: float
+    sigma2: float
+    phi: float
+    phi_white: float
+    steps: int
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _lm_batch(model: Model, data: Data, z0, phi, index, value, decrement=1e-4):
+    """LM from each row of ``z0`` with ``z[index[k]]`` held at ``value[k]`` (``-1``:
+    nothing held), as one vmapped program: ``(z, |r|^2, steps)`` per row."""
+    p = len(model.params)
+
+    def one(z0, index, value):
+        held = jnp.arange(p) == index
+
+        def fn(z):
+            r = model.residuals(data, jnp.where(held, value, z), phi)
+            return r, r
+
+        return levenberg_marquardt(fn, jnp.where(held, value, z0), decrement)
+
+    return jax.vmap(one)(z0, index, value)
+
+
+def _lm(problem: Problem):
+    """The batched LM of :func:`_lm_batch` on ``problem``."""
+    return functools.partial(_lm_batch, problem.model, problem.data)
+
+
+def levenberg_marquardt(fn, z0, decrement=1e-4, max_steps: int = _MAX_STEPS):
+    """Minimise ``|r(z)|^2`` (``fn(z) -> (r, r)``) by Levenberg-Marquardt with Moré's
+    scaling and Nielsen's damping update (Madsen, Nielsen & Tingleff 2004, Algorithm
+    3.16, as :mod:`idtool._fit._lm`), the Jacobian by forward mode (one pass of the
+    scan per parameter, with the residuals as its primal). Stops when the full
+    Gauss-Newton step would lower -2 log L by less than ``decrement`` (the main fit's
+    test of an optimum; 1e-2 for a profile's refits, as :data:`REFIT_DECREMENT`), or a
+    step changes z by less than ``_RTOL`` (relative).
+    Returns ``(z, |r|^2, steps)``; pure JAX (a ``lax.while_loop``)."""
+    jac = jax.jacfwd(fn, has_aux=True)
+
+    def lin(z):
+        j, r = jac(z)
+        return r, j
+
+    r0, j0 = lin(z0)
+    a0 = j0.T @ j0
+    state0 = (z0, r0, j0, 1e-3 * jnp.max(jnp.diag(a0)), 2.0, 0, False)
+
+    def cond(state):
+        return (state[5] < max_steps) & ~state[6]
+
+    def body(state):
+        z, r, j, mu, nu, k, _ = state
+        a, g = j.T @ j, j.T @ r
+        # Moré's scaling, floored: a parameter in its sigmoid's tail (diag ~ 1e-15 of
+        # the others) would otherwise get a huge step that the cap below turns into a
+        # step along it alone, and LM would crawl along the flat tail
+        d = jnp.maximum(jnp.diag(a), 1e-6 * jnp.max(jnp.diag(a)))
+        d = jnp.where(d > 0, d, 1.0)
+        h = jnp.linalg.solve(a + mu * jnp.diag(d), -g)
+        # at most _MAX_STEP_Z on the internal scale: a longer Gauss-Newton step can jump
+        # a bounded parameter into its sigmoid's flat tail, where no gradient brings it
+        # back (a LuGre static ratio at 1, its Stribeck velocity at a bound)
+        h = h * jnp.minimum(1.0, _MAX_STEP_Z / jnp.max(jnp.abs(h)))
+        # the Gauss-Newton decrement, in residual variances: the loss the full GN step
+        # would still gain; below _DECREMENT the optimum is reached
+        gn = jnp.linalg.solve(a + 1e-12 * jnp.diag(d), g)
+        variance = (r @ r) / jnp.maximum(r.size - z.size, 1)
+        converged = g @ gn <= decrement * variance
+        z_new = z + h
+        r_new, j_new = lin(z_new)
+        loss, loss_new = r @ r, r_new @ r_new
+        predicted = -(2.0 * g @ h + h @ a @ h)  # loss - |r + J h|^2
+        rho = (loss - loss_new) / jnp.where(predicted > 0, predicted, 1.0)
+        ok = jnp.isfinite(loss_new) & (loss_new < loss)
+        small = converged | (jnp.linalg.norm(h) <= _RTOL * (jnp.linalg.norm(z) + _RTOL))
+        mu_ok = mu * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+        return (
+            jnp.where(ok & ~converged, z_new, z),
+            jnp.where(ok & ~converged, r_new, r),
+            jnp.where(ok & ~converged, j_new, j),
+            jnp.where(ok, mu_ok, mu * nu),
+            jnp.where(ok, 2.0, 2.0 * nu),
+            k + 1,
+            small | (mu > 1e30),
+        )
+
+    z, r, _, _, _, k, _ = jax.lax.while_loop(cond, body, state0)
+    return z, r @ r, k
+
+
+def ar1(r: np.ndarray) -> float:
+    """Lag-1 autocorrelation of residuals ``r``."""
+    r = r - r.mean()
+    return float(np.dot(r[1:], r[:-1]) / np.dot(r, r))
+
+
+def solve(problem: Problem) -> tuple[Optimum, object]:
+    """The least-squares optimum of ``problem`` from the best starts of
+    :func:`idtool._lawfit._problem.start_grid`, whitened by AR(1) when the white fit's
+    residuals are correlated (:data:`PHI_TRIGGER`). Returns it and the batched LM (for
+    the profile refits)."""
+    grid = start_grid(problem)
+    losses = np.asarray(batch_loss(problem.model, problem.data, jnp.asarray(grid)))
+    order = np.argsort(np.where(np.isfinite(losses), losses, np.inf))[:_BEST_STARTS]
+    lm = _lm(problem)
+    none = jnp.full(order.size, -1)
+    z, loss, steps = lm(jnp.asarray(grid[order]), 0.0, none, jnp.zeros(order.size))
+    best = int(np.nanargmin(np.asarray(loss)))
+    z_white = np.asarray(z[best])
+    r = np.asarray(problem.residuals(jnp.asarray(z_white)))
+    n = r.size
+    phi_white = ar1(r)
+    phi, step_count = 0.0, int(steps[best])
+    z_opt = z_white
+    if abs(phi_white) > max(PHI_TRIGGER, 3.0 / math.sqrt(n)):
+        # Cochrane-Orcutt: refit on the innovations, re-estimate phi, refit once more
+        phi = phi_white
+        for _ in range(2):
+            zz, _, st = lm(jnp.asarray(z_opt[None]), phi, jnp.array([-1]), jnp.zeros(1))
+            z_opt, step_count = np.asarray(zz[0]), int(st[0])
+            phi = ar1(np.asarray(problem.residuals(jnp.asarray(z_opt))))
+        phi = float(np.clip(phi, -0.99, 0.99))
+    zj = jnp.asarray(z_opt)
+    rw = np.asarray(problem.residuals(zj, phi))
+    jac = np.asarray(_jacobian(problem.model, problem.data, zj, phi))
+    rss = float(rw @ rw)
+    sigma2 = rss / (n - z_opt.size)
+    return Optimum(z_opt, sigma2 * _pinv(jac.T @ jac), rss, sigma2, phi, phi_white, step_count), lm
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _jacobian(model: Model, data: Data, z, phi):
+    return jax.jacfwd(lambda zz: model.residuals(data, zz, phi))(z)
+
+
+def _pinv(a: np.ndarray) -> np.ndarray:
+    """Inverse of ``J^T J``; a parameter whose column is zero (the data do not move it)
+    gets an infinite variance, the others the inverse of their block."""
+    p = a.shape[0]
+    out = np.full((p, p), 0.0)
+    moved = np.diag(a) > 1e-300 * max(1.0, float(np.max(np.diag(a))))
+    idx = np.flatnonzero(moved)
+    out[np.ix_(idx, idx)] = np.linalg.pinv(a[np.ix_(idx, idx)], rcond=1e-13, hermitian=True)
+    out[~moved, ~moved] = np.inf
+    return out
+
+
+def refit_batch(lm, optimum: Optimum, index: np.ndarray, value: np.ndarray, starts=None):
+    """Refit with ``z[index[k]]`` held at ``value[k]``, every k at once; returns the
+    refitted z (k, p) and the rise of ``-2 log L``, ``(RSS_k - RSS) / sigma2``."""
+    k = len(index)
+    z0 = np.tile(optimum.z, (k, 1)) if starts is None else np.asarray(starts)
+    z0[np.arange(k), index] = value
+    z, loss, _ = lm(
+        jnp.asarray(z0), optimum.phi, jnp.asarray(index), jnp.asarray(value), REFIT_DECREMENT
+    )
+    return np.asarray(z), (np.asarray(loss) - optimum.rss) / optimum.sigma2
