@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 
 from idtool._atomic import refuse_existing
+from idtool._cli._args import LazyChoices
 
 __all__ = ["register"]
 
@@ -22,9 +23,13 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    from idtool._model._series_law import series_law_names
+def _law_names() -> tuple[str, ...]:
+    from idtool._model._series_law import series_law_names  # imports JAX: read when needed
 
+    return series_law_names()
+
+
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "fit-law",
         help="fit a friction law (LuGre, Dahl, Coulomb-viscous) to a velocity-force series",
@@ -37,7 +42,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("series", help="CSV or Parquet file: time, velocity or displacement, force")
     p.add_argument(
-        "--law", default="lugre", help=f"one of {', '.join(series_law_names())} (default lugre)"
+        "--law",
+        default="lugre",
+        choices=LazyChoices(_law_names),
+        metavar="LAW",  # argparse reads the choices for a missing metavar: JAX at --help
+        help="friction law: %(choices)s (default lugre)",
     )
     p.add_argument("--out", required=True, help="output folder, e.g. fits/NAME")
     p.add_argument("--posterior", action="store_true", help="also sample the posterior (emcee)")
