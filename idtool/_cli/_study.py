@@ -7,6 +7,7 @@ import argparse
 import os
 from pathlib import Path
 
+from idtool._cli._args import LazyChoices
 from idtool._errors import IdtoolError
 
 __all__ = ["register"]
@@ -70,9 +71,13 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    from idtool._study._study import DEPARTURES
+def _departures() -> tuple[str, ...]:
+    from idtool._study._study import DEPARTURES  # imports JAX: read when needed
 
+    return DEPARTURES
+
+
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "study",
         help="simulation-based check of a design: band width, coverage, SBC ranks, law wins",
@@ -96,9 +101,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--truths", type=int, default=100, help="truths (fits) to run (default 100)")
     p.add_argument(
         "--departure",
-        choices=DEPARTURES,
+        choices=LazyChoices(_departures),
+        metavar="KIND",  # argparse reads the choices for a missing metavar: JAX at --help
         default="clean",
-        help="the simulated bench's departure from the fit's model (default clean: none)",
+        help="the simulated bench's departure from the fit's model: %(choices)s (default "
+        "clean: none)",
     )
     p.add_argument(
         "--sample",
