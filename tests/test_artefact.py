@@ -274,9 +274,16 @@ def test_a_fit_folder_with_dense_covariances_reads_and_predicts_the_same(
     """The state files hold the covariances of ``z`` and of the free levels in blocks,
     nothing of size (p, p) or (levels, levels) (issue 28); a folder written before the
     blocks (``cov_z`` and ``levels_cov_y`` dense, as each law's state file held them)
-    reads to the same matrices and predicts the same."""
-    _, loaded, _, root = fresh_and_loaded
+    reads to the same matrices and predicts the same. Such a folder also predates the
+    levels model's Jacobian (version 3): compared with the same folder in blocks without
+    it, both drawing at the REML sds' covariance."""
+    _, _, _, root = fresh_and_loaded
     old = shutil.copytree(root / "fit", tmp_path / "old")
+    blocked = shutil.copytree(root / "fit", tmp_path / "blocked")
+    for path in sorted(blocked.glob("fit_state*.npz")):
+        with np.load(path) as npz:
+            np.savez(path, **{k: np.asarray(npz[k]) for k in npz.files if k != "levels_jacobian"})
+    loaded = idtool.load_fit(blocked)
     blocks = ("cov_z_shared", "cov_z_cross", "cov_z_block", "cov_z_load", "cov_z_core")
     fit = idtool.load_fit(root / "fit")
     laws = [fit.artefact.chosen] + [law for _, law in fit.artefact.alternates.values()]
@@ -290,7 +297,11 @@ def test_a_fit_folder_with_dense_covariances_reads_and_predicts_the_same(
         assert "levels_cov_block" in arrays and "levels_cov_y" not in arrays
         assert all(a.shape not in ((p, p), (n, n)) for a in arrays.values()), path.name
         law = next(w for w in laws if np.array_equal(w.z, arrays["z"]))
-        dense = {k: a for k, a in arrays.items() if k not in blocks and "levels_cov_" not in k}
+        dense = {
+            k: a
+            for k, a in arrays.items()
+            if k not in blocks and "levels_cov_" not in k and k != "levels_jacobian"
+        }
         dense["cov_z"] = law.cov_z.dense()
         dense["levels_cov_y"] = law.levels[0].covariance()
         np.savez(path, **dense)

@@ -20,6 +20,7 @@ without one (written before the field) reads as version 1, whose fields are a su
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 from collections.abc import Mapping
 from typing import Any
@@ -35,9 +36,10 @@ from idtool._fit._discrepancy import Conditioning
 from idtool._fit._folder import FIT_STATE
 from idtool._fit._free_levels import FreeLevels
 from idtool._fit._level_cov import LevelCovariance
-from idtool._fit._level_design import discrepancy_conditioning
+from idtool._fit._level_design import discrepancy_conditioning, level_design
 from idtool._fit._result import Estimate, FitResult
 from idtool._fit._summary import FitSummary, estimate_of_doc, fit_summary
+from idtool._fit._variability import SD_PARAMS, ThetaGivenSds
 from idtool._model._benchmodel import BenchModel
 from idtool._model._settings import ParameterSetting
 from idtool._model._spec import ModelSpec
@@ -61,7 +63,10 @@ class LawFit:
     dense from a folder written before them: :mod:`idtool._fit._cov`), noise
     parameters ``noise_state`` (the noise model's correlation state) and ``sigma_n``
     [N], and the levels model's sd grids (name ->
-    (sd values, posterior probabilities)) and state (free levels, sds), or none."""
+    (sd values, posterior probabilities)) and state (free levels, sds), or none;
+    ``levels_jacobian`` (n, k): the Jacobian of the levels model's log levels in the
+    physical parameters at the estimate (:attr:`Variability.jacobian
+    <idtool._fit._variability.Variability.jacobian>`; none in a folder written before it)."""
 
     spec: ModelSpec
     model: BenchModel = dataclasses.field(repr=False)
@@ -71,6 +76,25 @@ class LawFit:
     sigma_n: float
     sd_grids: SdGrids = dataclasses.field(default_factory=dict, repr=False)
     levels: Levels | None = dataclasses.field(default=None, repr=False)
+    levels_jacobian: np.ndarray | None = dataclasses.field(default=None, repr=False)
+
+    @functools.cached_property
+    def theta_given_sds(self) -> ThetaGivenSds | None:
+        """The physical parameters' covariance as a function of the sds
+        (:class:`~idtool._fit._variability.ThetaGivenSds`: what predictions draw them
+        from, given each draw's sds), or None: the levels model off, or a fit folder
+        written before the Jacobian (version 2) or before the free levels' blocks."""
+        if self.levels is None or self.levels_jacobian is None:
+            return None
+        free, sds = self.levels
+        if free.cov_parts is None:
+            return None
+        design = level_design(self.model, free.measured)
+        parts = dataclasses.replace(free.cov_parts, disc=design.disc_root)
+        # the REML variances, as the fit had them: an sd the data cannot inform (not
+        # estimated, not in ``sds``) at zero
+        tau2 = np.array([sds[p.name][0] ** 2 if p.name in sds else 0.0 for p in SD_PARAMS])
+        return ThetaGivenSds(parts, np.asarray(self.levels_jacobian, float), tau2)
 
     @property
     def phi(self) -> float:
@@ -147,7 +171,8 @@ def state_arrays(result: FitResult) -> dict[str, np.ndarray]:
     (in blocks, :func:`~idtool._fit._cov.covariance_state`), ``phi`` and the noise's
     correlation state ``noise_state``, ``sigma_n`` [N], the parameter names, the
     multi-start's optima (``optima_rss`` [N^2], ``optima_z``: their physical blocks,
-    internal scale) and the levels model's sd grids and state."""
+    internal scale) and the levels model's sd grids and state (with, since version 3,
+    ``levels_jacobian``: the physical parameters' covariance at any sds needs it)."""
     k = result.model.n_physical
     arrays: dict[str, np.ndarray] = {
         "z": np.asarray(result.z),
@@ -180,6 +205,9 @@ def state_arrays(result: FitResult) -> dict[str, np.ndarray]:
                 "levels_cov_block": free.cov_parts.block,
                 "levels_cov_low": free.cov_parts.low,
             }
+    v = result.variability
+    if v is not None and v.jacobian is not None:  # since version 3: theta given the sds
+        arrays["levels_jacobian"] = np.asarray(v.jacobian, float)
     return arrays
 
 
@@ -237,6 +265,9 @@ def _law_fit(spec: ModelSpec, data: FitData, state: Mapping[str, np.ndarray], wh
             if key.startswith("sd_grid:")
         },
         levels=levels,
+        levels_jacobian=np.asarray(state["levels_jacobian"])
+        if "levels_jacobian" in state
+        else None,
     )
 
 

@@ -43,8 +43,10 @@ __all__ = [
 
 # fit.json's layout. "1": every fit.json before the field (read as version 1: the same
 # fields, the optional ones absent); "2": with ``schema_version``, and fit_state.npz with
-# the multi-start's optima on the internal scale.
-FIT_SCHEMA_VERSION = "2"
+# the multi-start's optima on the internal scale; "3": fit_state.npz with the levels
+# model's Jacobian ``levels_jacobian`` (predictions draw the physical parameters given
+# each draw's sds; a version-2 folder draws them at the REML sds, as before, and says so).
+FIT_SCHEMA_VERSION = "3"
 # sample.json's and validation.json's layouts: "1" (a file without the field, written
 # before it, has the same fields and reads as version 1).
 SAMPLE_SCHEMA_VERSION = "1"

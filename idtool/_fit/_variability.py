@@ -61,8 +61,10 @@ from idtool._model._params import Param
 __all__ = [
     "MISFIT",
     "SD_PARAMS",
+    "ThetaGivenSds",
     "Variability",
     "estimate_variability",
+    "theta_covariance",
 ]
 
 SD_PARAMS = (
@@ -127,6 +129,10 @@ class Variability:
     loglik_without: float  # at zero sds
     warnings: tuple[str, ...]
     notes: tuple[str, ...] = ()  # facts about the data for the report, not doubts
+    # G = d g / d theta at ``theta`` in the rows of ``free.y`` (n, k): with ``free``'s
+    # covariance and the design's discrepancy, the physical parameters' covariance at any
+    # sds (:class:`ThetaGivenSds`), what predictions draw them from
+    jacobian: np.ndarray | None = None
 
     def summary(self) -> str:
         """One line per sd, in relative terms, for reports."""
@@ -172,6 +178,48 @@ def _gls_form(parts: LevelCovariance, tau2: np.ndarray):
         return quad, np.einsum("mik,mil->kl", gp, solve(f, gp))
 
     return form
+
+
+def theta_covariance(parts: LevelCovariance, jacobian: np.ndarray, tau2) -> np.ndarray:
+    """The physical parameters' covariance (k, k), internal scale, on the linearised
+    levels model at the variances ``tau2`` (3,) of (scatter_mu, scatter_fr,
+    discrepancy_fr): ``Sigma(sds) = (G^T C(sds)^-1 G)^-1`` (the generalised least-squares
+    estimate's, module docstring), ``G`` the ``jacobian`` (n, k) in the levels model's
+    rows, ``C = V + Sigma(sds)`` in blocks (``parts`` with the discrepancy's root,
+    :mod:`idtool._fit._level_cov`). At the REML ``tau2`` it is the fit's
+    :attr:`Variability.cov_theta`, by construction (one function computes both)."""
+    jacobian = np.asarray(jacobian, float)
+    info = _gls_form(parts, tau2)(np.zeros(jacobian.shape[0]), jacobian)[1]
+    return np.linalg.inv(info)
+
+
+@dataclasses.dataclass(frozen=True)
+class ThetaGivenSds:
+    """The physical parameters' covariance given the sds (:func:`theta_covariance`), for
+    predictions that draw the sds: conditionally on them, theta ~ N(theta_hat,
+    Sigma(sds)). ``parts``: ``V`` in blocks with the discrepancy's root; ``jacobian``
+    ``G`` (n, k); ``tau2`` (3,) the REML variances, what an sd not drawn keeps."""
+
+    parts: LevelCovariance
+    jacobian: np.ndarray
+    tau2: np.ndarray
+
+    def at(self, sds: dict[str, float]) -> np.ndarray:
+        """``Sigma`` (k, k) at the sds ``sds`` (name -> relative sd; the others at their
+        REML estimates: zero for one the data cannot inform)."""
+        tau2 = np.array(self.tau2, float)
+        for j, p in enumerate(SD_PARAMS):
+            if p.name in sds:
+                tau2[j] = float(sds[p.name]) ** 2
+        try:
+            return theta_covariance(self.parts, self.jacobian, tau2)
+        except np.linalg.LinAlgError:
+            # A direction the levels do not inform (a coupling law with a parameter the
+            # data cannot place: the fit warns; on the small bench the load-power law's
+            # information had eigenvalues 6e-10 to 1.4e7) is singular at some sds to
+            # round-off: as predictions treat a degenerate covariance, no spread there.
+            info = _gls_form(self.parts, tau2)(np.zeros(self.jacobian.shape[0]), self.jacobian)[1]
+            return np.linalg.pinv(0.5 * (info + info.T), hermitian=True)
 
 
 def _line_search(model, z, state, y, rows, form, theta, step, r, at_theta):
@@ -240,7 +288,7 @@ def estimate_variability(model: BenchModel, z: np.ndarray, state) -> Variability
     g_all, jac_all = levels  # at theta
     r, g = free.y - g_all[rows], jac_all[rows]
     r2, g2 = to_pairs(r, meas), to_pairs(g, meas)
-    cov_theta = np.linalg.inv(_gls_form(parts, tau2)(r, g)[1])
+    cov_theta = theta_covariance(parts, g, tau2)
     if not (np.all(np.isfinite(cov_theta)) and np.all(np.diag(cov_theta) > 0.0)):
         raise np.linalg.LinAlgError("they do not inform every physical parameter")
     nll, _ = at_sds(tau2, r2, g2, args)
@@ -348,4 +396,5 @@ def estimate_variability(model: BenchModel, z: np.ndarray, state) -> Variability
         loglik_without=-float(nll0) - const,
         warnings=tuple(warnings),
         notes=tuple(notes),
+        jacobian=g,
     )

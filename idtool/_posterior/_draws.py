@@ -84,6 +84,13 @@ def fit_draws(
         primary = draws_from_stored(posterior, chosen.model, max_draws, grids, seed, cond)
     else:
         primary = draws_from_covariance(
-            chosen.model, chosen.z, chosen.cov_z, max_draws, seed, grids, cond
+            chosen.model,
+            chosen.z,
+            chosen.cov_z,
+            max_draws,
+            seed,
+            grids,
+            cond,
+            chosen.theta_given_sds,
         )
     return average_over_laws(primary, fit.chosen_weight, fit.alternates, seed)

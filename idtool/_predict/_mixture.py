@@ -50,8 +50,8 @@ def average_over_laws(
 ) -> Draws:
     """``primary`` (the chosen law's draws) pooled with draws of each other law in
     ``others`` (law -> (BIC weight, its fit: ``model``, ``z``, ``cov_z``, ``sd_grids``,
-    ``conditioning``)), each law's share of ``primary.n`` draws its weight's; the
-    weights renormalised over the laws kept."""
+    ``conditioning``, ``theta_given_sds``)), each law's share of ``primary.n`` draws
+    its weight's; the weights renormalised over the laws kept."""
     if not others:
         return primary
     chosen = primary.model.coupling.name
@@ -67,7 +67,14 @@ def average_over_laws(
             continue
         parts.append(
             draws_from_covariance(
-                fit.model, fit.z, fit.cov_z, count, seed + 1 + i, fit.sd_grids, fit.conditioning
+                fit.model,
+                fit.z,
+                fit.cov_z,
+                count,
+                seed + 1 + i,
+                fit.sd_grids,
+                fit.conditioning,
+                fit.theta_given_sds,
             )
         )
     shares = ", ".join(

@@ -25,6 +25,7 @@ from idtool._data._blocks import FitData
 from idtool._diagnostic import Diagnostic
 from idtool._fit._cov import Covariance
 from idtool._fit._discrepancy import Conditioning, discrepancy_moments, operating_coordinates
+from idtool._fit._variability import ThetaGivenSds
 from idtool._model._benchmodel import BenchModel
 
 SD_NAMES = ("discrepancy_fr", "scatter_fr")  # the sds a prediction uses
@@ -179,26 +180,49 @@ def draws_from_covariance(
     seed: int = 0,
     sd_grids: SdGrids | None = None,
     conditioning: Conditioning | None = None,
+    theta_given_sds: ThetaGivenSds | None = None,
 ) -> Draws:
     """Gaussian draws on the internal scale from a fit's covariance: a local
     approximation of the posterior, mapped through the transforms; the sds from the
-    fit's sd grids ``sd_grids``; the discrepancy conditioned on ``conditioning``."""
+    fit's sd grids ``sd_grids``; the discrepancy conditioned on ``conditioning``.
+
+    With ``theta_given_sds`` (the levels model's covariance as a function of the sds,
+    :class:`~idtool._fit._variability.ThetaGivenSds`) each draw's physical parameters
+    are drawn given its own sds, ``theta_k ~ N(theta_hat, Sigma(s_k))`` with ``Sigma(s)
+    = (G^T C(s)^-1 G)^-1``: an uncertain discrepancy or scatter widens the parameters'
+    spread with it, as the planner's linear-Gaussian model has it
+    (:mod:`idtool._plan._linear`). The mean stays at the estimate: the generalised
+    least-squares estimate moves with the sds too, but its shift is of second order
+    (the linearised model's residuals are small against their covariance). Without it
+    (the levels model off, or a fit folder written before the Jacobian), every draw
+    uses ``cov_z``'s block, the covariance at the REML sds (when the levels model is
+    on the two are equal there: the fit sets its block to the levels model's)."""
     k = model.n_physical
     rng = np.random.default_rng(seed)
-    block = cov_z.leading(k)  # the physical parameters' block: all the draws need
-    cov = 0.5 * (block + block.T)
-    s, v = np.linalg.eigh(cov)
-    if s.min() < 0.0:
-        # A degenerate fit (a parameter at its bound, a direction the data do not
-        # inform: the fit warns of both) leaves round-off below zero in the
-        # pseudo-inverse's spectrum; those directions get no spread.
-        cov = (v * np.clip(s, 0.0, None)) @ v.T
-    draws = rng.multivariate_normal(z[:k], cov, size=max_draws, method="eigh", check_valid="ignore")
+    sds, how = _sds({}, sd_grids, max_draws, seed)
+    if theta_given_sds is not None and sds:
+        draws = z[:k] + _conditional_steps(
+            theta_given_sds, sds, rng.standard_normal((max_draws, k))
+        )
+        how = (
+            "; the physical parameters drawn given each draw's sds (their covariance "
+            "(G^T C(sds)^-1 G)^-1, the mean at the estimate)" + how
+        )
+    else:
+        cov = _psd(cov_z.leading(k))  # the physical parameters' block: all the draws need
+        draws = rng.multivariate_normal(
+            z[:k], cov, size=max_draws, method="eigh", check_valid="ignore"
+        )
+        if sd_grids and theta_given_sds is None:
+            how += (
+                "; the physical parameters' covariance at the REML sds for every draw (a "
+                "fit folder without the levels model's Jacobian: fit again for draws "
+                "given each draw's sds)"
+            )
     values = {
         p.name: np.asarray(p.value(jnp.asarray(draws[:, i])))
         for i, p in enumerate(model.shared_params[:k])
     }
-    sds, how = _sds({}, sd_grids, max_draws, seed)
     note = (
         "no posterior: Gaussian draws on the internal scale from the fit's covariance "
         "(a local approximation; run 'idtool sample' or Fit.sample() for the posterior)"
@@ -206,6 +230,40 @@ def draws_from_covariance(
         + _conditioned(sds, conditioning)
     )
     return Draws(model, values, "fit covariance", note, sds, seed, conditioning)
+
+
+def _psd(block: np.ndarray) -> np.ndarray:
+    """A covariance block symmetrised, its spectrum clipped at zero: a degenerate fit (a
+    parameter at its bound, a direction the data do not inform: the fit warns of both)
+    leaves round-off below zero in the pseudo-inverse's spectrum; those directions get
+    no spread."""
+    cov = 0.5 * (block + block.T)
+    s, v = np.linalg.eigh(cov)
+    if s.min() < 0.0:
+        cov = (v * np.clip(s, 0.0, None)) @ v.T
+    return cov
+
+
+def _conditional_steps(
+    theta_given_sds: ThetaGivenSds, sds: dict[str, np.ndarray], eps: np.ndarray
+) -> np.ndarray:
+    """Per draw, ``theta_k - theta_hat = R(s_k) eps_k`` (draws, k), ``R(s) R(s)^T =
+    Sigma(s)`` (its eigenvectors times the square roots of its eigenvalues, clipped at
+    zero as :func:`_psd`), from standard normals ``eps`` (draws, k) and the draws' sds.
+    The sds come from grids, so many draws share theirs (the spike at zero, the grid's
+    cells): ``Sigma`` is factored once per distinct draw of the sds."""
+    names = list(sds)
+    table = np.stack([np.asarray(sds[n], float) for n in names], axis=1)
+    distinct, where = np.unique(table, axis=0, return_inverse=True)
+    where = np.ravel(where)
+    out = np.empty_like(eps)
+    for i, row in enumerate(distinct):
+        cov = theta_given_sds.at(dict(zip(names, row, strict=True)))
+        s, v = np.linalg.eigh(0.5 * (cov + cov.T))
+        root = v * np.sqrt(np.clip(s, 0.0, None))
+        mine = where == i
+        out[mine] = eps[mine] @ root.T
+    return out
 
 
 def extrapolation_notes(data: FitData, loads_n=(), amplitudes=(), speeds_m_s=()) -> list[str]:
