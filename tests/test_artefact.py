@@ -96,6 +96,9 @@ CALLS = {
     "validate": lambda f, other, root: f.validate(other, max_draws=300),
     "to_json": lambda f, other, root: f.to_json(),
     "save": lambda f, other, root: _saved(f, root),
+    "plan": lambda f, other, root: f.plan(
+        "band", 2, at=[(450.0, 0.6)], grid=(3, 3), max_draws=200, seed=1
+    ),
 }
 # the run and its chosen result (the candidates in memory) are a fresh fit's only, and
 # from_run makes one
