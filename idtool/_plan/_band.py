@@ -14,7 +14,6 @@ width: ``(min(e^q_hi, 1) - min(e^q_lo, 1)) / 2``.
 from __future__ import annotations
 
 import numpy as np
-from scipy.special import ndtr
 
 __all__ = ["mixture_half_width", "mixture_quantiles"]
 
@@ -25,6 +24,11 @@ def mixture_quantiles(
     """Quantiles of the mixture of ``N(means[i], variances[i])`` with ``weights[i]``
     (flat arrays, weights summing to 1; eq. B1) at ``probs``, by bisection (60 halvings:
     to round-off). A zero variance is a point mass."""
+    # here, not at the top: the fit's import path (idtool._entry -> Fit.plan) stays
+    # without scipy.special, which idtool fit imports in the background
+    # (test_scipy_special_is_off_the_fits_import_path_and_imported_in_the_background)
+    from scipy.special import ndtr
+
     m = np.ravel(means)
     sd = np.sqrt(np.maximum(np.ravel(variances), 1e-300))
     w = np.ravel(weights) / np.sum(weights)
