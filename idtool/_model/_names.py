@@ -1,11 +1,12 @@
-"""The default coupling law and noise, actuator, offset and level models by registered name:
-plain strings in a module that imports nothing, so the command line's parsers can show
-them without loading the models (and JAX)."""
+"""The default coupling law, direction of vibration and noise, actuator, offset and level
+models by registered name: plain strings in a module that imports nothing, so the command
+line's parsers can show them without loading the models (and JAX)."""
 
 __all__ = [
     "BY_DESIGN",
     "DEFAULT_ACTUATOR",
     "DEFAULT_COUPLING",
+    "DEFAULT_DIRECTION",
     "DEFAULT_LEVEL_MODEL",
     "DEFAULT_NOISE",
     "DEFAULT_OFFSET",
@@ -15,6 +16,8 @@ __all__ = [
 DEFAULT_NOISE = "ar1"
 DEFAULT_ACTUATOR = "slope"
 DEFAULT_OFFSET = "constant"
+# The vibration along the sliding, the seed paper's model (idtool._model._directions).
+DEFAULT_DIRECTION = "along"
 # Levels constant within their plateaus (idtool._model._level_model); "auto" fits try the
 # relaxing ON level or the creeping level only where the steady fit's plateaus drift.
 DEFAULT_LEVEL_MODEL = "steady"
