@@ -76,6 +76,10 @@ _LAZY = {
     "CycleAverage": "idtool._model._contact",
     "cycle_average_curve": "idtool._model._contact",
     "prescribed_cycle_average": "idtool._model._contact",
+    "AbstractDirection": "idtool._model._directions",
+    "DIRECTIONS": "idtool._model._directions",
+    "transverse_cycle_average": "idtool._model._direction_transverse",
+    "normal_friction_ratio": "idtool._model._direction_normal",
     "AbstractCoupling": "idtool._model._coupling",
     "COUPLINGS": "idtool._model._coupling",
     "ConstantCoupling": "idtool._model._coupling",
@@ -230,6 +234,16 @@ if TYPE_CHECKING:
         LoadPowerCoupling as LoadPowerCoupling,
         PowerLimitedCoupling as PowerLimitedCoupling,
         SdofCoupling as SdofCoupling,
+    )
+    from idtool._model._direction_normal import (
+        normal_friction_ratio as normal_friction_ratio,
+    )
+    from idtool._model._direction_transverse import (
+        transverse_cycle_average as transverse_cycle_average,
+    )
+    from idtool._model._directions import (
+        AbstractDirection as AbstractDirection,
+        DIRECTIONS as DIRECTIONS,
     )
     from idtool._model._coupling_sdof import (
         sdof_detuning_n_m as sdof_detuning_n_m,

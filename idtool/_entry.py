@@ -18,7 +18,7 @@ from idtool._errors import IdtoolError
 from idtool._fit._parameter_table import parse_fix, read_parameter_table
 from idtool._fit._run import fit_dataset
 from idtool._fit._store import load_artefact
-from idtool._model._names import BY_DESIGN
+from idtool._model._names import BY_DESIGN, DEFAULT_DIRECTION
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._settings import ParameterSetting
 from idtool._report._compare import TARGETS, Comparison, compare, compare_request
@@ -46,6 +46,7 @@ def fit(
     traces: str | Sequence[str] | None = None,
     fix: Mapping[str, float] | None = None,
     parameters: str | os.PathLike | Sequence[ParameterSetting] | None = None,
+    direction: str = DEFAULT_DIRECTION,
 ) -> Fit:
     """Identify Kt, mu and the coupling from every trace of ``dataset`` (or those
     ``traces`` selects) at once.
@@ -96,6 +97,11 @@ def fit(
             or its settings (:class:`idtool.ParameterSetting`): fixed values, bounds,
             scales, starts and the sampler's priors. ``fit.json`` records them, so
             :func:`load_fit` and :meth:`Fit.sample` use them too.
+        direction: the direction of vibration the contact model assumes, a name of
+            :data:`idtool.DIRECTIONS`: "along" the sliding (default, the seed paper's
+            model), "transverse" (in the contact plane, across the sliding) or "normal"
+            (out of plane: the indentation oscillates). Every candidate model shares
+            it; ``fit.json`` records it (``direction``). Not with the "sdof" coupling.
     """
     if starts < 1:
         raise IdtoolError(f"starts = {starts}: give at least 1")
@@ -127,6 +133,7 @@ def fit(
         level=level,
         progress=progress,
         settings=settings,
+        direction=direction,
     )
     return Fit.from_run(dataset, run, seconds=time.perf_counter() - started)
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import idtool
 from idtool._atomic import refuse_existing
 from idtool._cli._args import add_law_argument, load_numerics, registry_names
-from idtool._model._names import BY_DESIGN, DEFAULT_NOISE
+from idtool._model._names import BY_DESIGN, DEFAULT_DIRECTION, DEFAULT_NOISE
 from idtool._plotting import MODULES, import_in_background
 
 __all__ = ["register"]
@@ -41,6 +41,7 @@ def _run(args: argparse.Namespace) -> int:
         actuator=args.actuator,
         offset=args.offset,
         level=args.level,
+        direction=args.direction,
         seed=args.seed,
         starts=args.starts,
         compare_laws=args.compare_laws,
@@ -123,6 +124,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         "relaxing (the ON level relaxes from its cold-horn value with a time constant), "
         "creeping (the friction grows in proportion through the pull); default auto fits "
         "steady and tries the others only where its plateaus drift, keeping the lower BIC",
+    )
+    p.add_argument(
+        "--direction",
+        choices=registry_names("DIRECTIONS"),
+        metavar="DIRECTION",
+        default=DEFAULT_DIRECTION,
+        help="direction of the vibration relative to the sliding, %(choices)s: along "
+        f"(default {DEFAULT_DIRECTION}, the seed paper's model), transverse (in the contact "
+        "plane, across the sliding), normal (out of plane: the indentation oscillates)",
     )
     p.add_argument(
         "--noise",

@@ -317,8 +317,9 @@ def _spec(doc: Mapping[str, Any], coupling: str, key: str | None = None) -> Mode
     its ``key`` (law/coupling/actuator/offset[/level])."""
     settings = tuple(ParameterSetting.from_dict(s) for s in doc.get("parameter_settings", []))
     noise = str(doc["noise"].get("name", "ar1"))
+    direction = str(doc.get("direction", {}).get("name", "along"))  # before: along
     if key is not None:
-        return ModelSpec.from_key(key, noise, settings)
+        return ModelSpec.from_key(key, noise, settings, direction)
     return ModelSpec(
         doc["law"],
         coupling,
@@ -327,6 +328,7 @@ def _spec(doc: Mapping[str, Any], coupling: str, key: str | None = None) -> Mode
         doc.get("offset", {}).get("name", "constant"),  # before the drift model: constant
         doc.get("level", {}).get("name", "steady"),  # before the level models: steady
         settings,
+        direction,
     )
 
 

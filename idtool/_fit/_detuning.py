@@ -80,6 +80,7 @@ def _free_model(result: FitResult) -> BenchModel:
         offset=model.offset,
         level=model.level,
         settings=(*settings, ParameterSetting(DETUNING, source="identified from the traces")),
+        direction=model.direction,
     )
 
 
@@ -144,6 +145,7 @@ def detuned_fit(result: FitResult, z_best: np.ndarray) -> FitResult:
         offset=m.offset.name,
         settings=free.settings,
         level=m.level.name,
+        direction=m.direction.name,
     )
 
 

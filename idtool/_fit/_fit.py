@@ -39,7 +39,7 @@ from idtool._fit._program import run_lm, unwhiten
 from idtool._fit._result import WEAK_DECADES, Estimate, FitResult, estimate_of
 from idtool._model._actuator import DEFAULT_ACTUATOR
 from idtool._model._benchmodel import BenchModel, bench_model
-from idtool._model._names import DEFAULT_COUPLING, DEFAULT_LEVEL_MODEL
+from idtool._model._names import DEFAULT_COUPLING, DEFAULT_DIRECTION, DEFAULT_LEVEL_MODEL
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._offset import DEFAULT_OFFSET
 from idtool._model._settings import ParameterSetting
@@ -166,6 +166,7 @@ def fit_model(
     offset: str = DEFAULT_OFFSET,
     settings: tuple[ParameterSetting, ...] = (),
     level: str = DEFAULT_LEVEL_MODEL,
+    direction: str = DEFAULT_DIRECTION,
 ) -> FitResult:
     """Fit one law, coupling, actuator, load-cell offset and level model to prepared data;
     see the module docstring. ``start_from``: a fit of a model this one nests (the slope
@@ -175,8 +176,9 @@ def fit_model(
     (:attr:`Param.nested_at`; each of :attr:`Param.nested_starts` in turn, the likeliest
     end kept), with no multi-start.
     ``settings``: the user's fixed values, bounds, scales, starts and priors
-    (:mod:`idtool._model._settings`)."""
-    model = bench_model(data, law, coupling, noise, actuator, offset, settings, level)
+    (:mod:`idtool._model._settings`); ``direction``: of the vibration
+    (:data:`idtool.DIRECTIONS`)."""
+    model = bench_model(data, law, coupling, noise, actuator, offset, settings, level, direction)
     k = model.n_physical
     base = model.z0()
     everything = np.ones(base.size, bool)

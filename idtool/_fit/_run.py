@@ -51,11 +51,17 @@ from idtool._fit._program import lm_arguments, lm_program
 from idtool._fit._result import FitResult
 from idtool._fit._with_levels import compile_variability, with_variability
 from idtool._model._actuator import ACTUATORS
-from idtool._model._benchmodel import bench_model, shared_params_of
+from idtool._model._benchmodel import bench_model, reacts_on_vibration, shared_params_of
 from idtool._model._coupling import COUPLINGS
+from idtool._model._directions import DIRECTIONS
 from idtool._model._laws import FRICTION_LAWS
 from idtool._model._level_model import LEVEL_MODELS
-from idtool._model._names import BY_DESIGN, DEFAULT_COUPLING, SPEED_RESOLVED_COUPLINGS
+from idtool._model._names import (
+    BY_DESIGN,
+    DEFAULT_COUPLING,
+    DEFAULT_DIRECTION,
+    SPEED_RESOLVED_COUPLINGS,
+)
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._offset import OFFSETS
 from idtool._model._params import Param
@@ -171,6 +177,7 @@ def fit_dataset(
     progress: Callable[[str], None] | None = None,
     settings: Sequence[ParameterSetting] = (),
     level: str = "auto",
+    direction: str = DEFAULT_DIRECTION,
 ) -> FitRun:
     """Fit ``dataset``; ``law``, ``coupling``, ``noise``, ``actuator``, ``offset`` and
     ``level`` by registered name (:data:`FRICTION_LAWS`, :data:`COUPLINGS`,
@@ -192,7 +199,10 @@ def fit_dataset(
     the interval checks, the levels model), for a command line's progress.
     ``settings``: fixed values, bounds, scales, starts and priors of shared parameters
     (:mod:`idtool._model._settings`), applied to every candidate model that has the
-    parameter; a setting that names none of them is an error."""
+    parameter; a setting that names none of them is an error. ``direction``: of the
+    vibration (:data:`DIRECTIONS`), shared by every candidate; with another than along,
+    ``coupling="auto"`` leaves out the coupling laws in which the contact loads the horn
+    (``sdof``: :func:`idtool._model._benchmodel.reacts_on_vibration`)."""
     started = time.perf_counter()
 
     def say(what: str) -> None:
@@ -213,6 +223,9 @@ def fit_dataset(
         couplings = SPEED_RESOLVED_COUPLINGS if pairs else (DEFAULT_COUPLING,)
     else:
         couplings = COUPLINGS.names() if coupling == "auto" else (coupling,)
+    direction = DIRECTIONS.get(direction).name
+    if coupling == "auto" and direction != DEFAULT_DIRECTION:
+        couplings = tuple(c for c in couplings if not reacts_on_vibration(COUPLINGS.get(c)))
     single_load = np.unique(data.normal_load_n).size == 1
     if coupling == "auto" and single_load:
         couplings = ("constant",)
@@ -230,13 +243,15 @@ def fit_dataset(
             (lw, cp, actuators[0], of, lv) for lw in laws for cp in couplings for of in offsets[1:]
         ]
         for names in plan[1:]:
-            ahead.call(functools.partial(_compile_lm, data, names, noise, settings))
+            ahead.call(functools.partial(_compile_lm, data, names, noise, settings, direction))
         candidates: dict[str, FitResult] = {}
 
         def fit_one(
             lw: str, cp: str, ac: str, of: str, start: FitResult | None, lvl: str = lv
         ) -> FitResult:
-            return fit_model(data, lw, cp, seed, n_starts, noise, ac, start, of, settings, lvl)
+            return fit_model(
+                data, lw, cp, seed, n_starts, noise, ac, start, of, settings, lvl, direction
+            )
 
         for lw in laws:
             for cp in couplings:
@@ -420,11 +435,17 @@ def drifting_levels(result: FitResult) -> tuple[str, ...]:
     return tuple(out)
 
 
-def _compile_lm(data: FitData, names: tuple[str, str, str, str, str], noise: str, settings) -> None:
+def _compile_lm(
+    data: FitData,
+    names: tuple[str, str, str, str, str],
+    noise: str,
+    settings,
+    direction: str = DEFAULT_DIRECTION,
+) -> None:
     """Compile the Levenberg-Marquardt program of the model ``names`` (law, coupling,
-    actuator, offset, level)."""
+    actuator, offset, level) in ``direction``."""
     lw, cp, ac, of, lvl = names
-    model = bench_model(data, lw, cp, noise, ac, of, settings, lvl)
+    model = bench_model(data, lw, cp, noise, ac, of, settings, lvl, direction)
     lm_program.compile_ahead(*lm_arguments(model))
 
 

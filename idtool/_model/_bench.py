@@ -23,8 +23,8 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from idtool._model._contact import prescribed_cycle_average
 from idtool._model._coupling import AbstractCoupling
+from idtool._model._directions import AbstractDirection, Along
 from idtool._model._laws import AbstractFrictionLaw, Dahl
 
 __all__ = [
@@ -58,10 +58,13 @@ def on_friction_ratio(
     pull_speed_m_s: Float[ArrayLike, ""],
     vibration_frequency_hz: Float[ArrayLike, ""],
     max_amplitude_m: Float[ArrayLike, ""],
+    direction: type[AbstractDirection] = Along,
 ) -> Float[Array, ""]:
     """Friction ratio FR = F_on / F_off at one operating point (notes §3, §5).
 
-    ``law`` must already carry ``Fc = mu N`` for this load (see :func:`dahl_at_load`).
+    ``law`` must already carry ``Fc = mu N`` for this load (see :func:`dahl_at_load`);
+    ``direction``: of the vibration (:data:`idtool.DIRECTIONS`; along the sliding by
+    default).
     """
     return on_contact(
         law,
@@ -71,6 +74,7 @@ def on_friction_ratio(
         pull_speed_m_s,
         vibration_frequency_hz,
         max_amplitude_m,
+        direction,
     )[0]
 
 
@@ -82,13 +86,15 @@ def on_contact(
     pull_speed_m_s: Float[ArrayLike, ""],
     vibration_frequency_hz: Float[ArrayLike, ""],
     max_amplitude_m: Float[ArrayLike, ""],
+    direction: type[AbstractDirection] = Along,
 ) -> tuple[Float[Array, ""], Float[Array, ""]]:
-    """:func:`on_friction_ratio` and the slip amplitude [m] it is taken at."""
+    """:func:`on_friction_ratio` and the vibration amplitude [m] it is taken at."""
     w = 2.0 * jnp.pi * jnp.asarray(vibration_frequency_hz)
     a = coupling.slip_amplitude_m(
         law, amplitude_fraction, normal_load_n, pull_speed_m_s, w, max_amplitude_m
     )
-    return prescribed_cycle_average(law, pull_speed_m_s, a, w).friction_ratio, a
+    cycle = direction.cycle_average(law, pull_speed_m_s, a, w, normal_load_n)
+    return cycle.friction_ratio, a
 
 
 def dahl_at_load(

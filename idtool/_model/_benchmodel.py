@@ -6,7 +6,8 @@ every dataset of the same shape; the friction law, the coupling law, the actuato
 the load-cell offset model, the level model and the noise model are static types, each
 declaring its own parameters (``fit_params``, ``trace_params``, ``params``) and
 registered by name (:data:`FRICTION_LAWS`, :data:`COUPLINGS`, :data:`ACTUATORS`,
-:data:`OFFSETS`, :data:`LEVEL_MODELS`, :data:`NOISE_MODELS`).
+:data:`OFFSETS`, :data:`LEVEL_MODELS`, :data:`NOISE_MODELS`); so is the direction of
+vibration (:data:`DIRECTIONS`), which has no parameters.
 
 Parameters, in the order of the internal vector ``z``:
 
@@ -42,9 +43,11 @@ from jaxtyping import Array, ArrayLike, Float
 
 from idtool._data._blocks import FitData
 from idtool._data._start_values import start_values
+from idtool._errors import IdtoolError
 from idtool._model._actuator import ACTUATORS, DEFAULT_ACTUATOR, AbstractActuator
 from idtool._model._bench import TraceTiming, on_friction_ratio
 from idtool._model._coupling import COUPLINGS, AbstractCoupling
+from idtool._model._directions import DEFAULT_DIRECTION, DIRECTIONS, AbstractDirection
 from idtool._model._laws import FRICTION_LAWS, MU, AbstractFrictionLaw
 from idtool._model._level_model import DEFAULT_LEVEL_MODEL, LEVEL_MODELS, AbstractLevelModel
 from idtool._model._names import DEFAULT_COUPLING
@@ -54,7 +57,7 @@ from idtool._model._params import Param
 from idtool._model._settings import ParameterSetting, apply_settings, fixed_values
 from idtool._model._xp import xp
 
-__all__ = ["TRACE_GROUPS", "BenchModel", "bench_model", "shared_params_of"]
+__all__ = ["TRACE_GROUPS", "BenchModel", "bench_model", "reacts_on_vibration", "shared_params_of"]
 
 # Per-trace nuisances of every model, after the offset model's: name, unit, internal
 # scale. The horn's lag behind the logged flag differs at switch-on and switch-off (each
@@ -84,6 +87,10 @@ class BenchModel(eqx.Module):
     noise: AbstractNoise = eqx.field(static=True)
     offset: type[AbstractOffset] = eqx.field(static=True)
     level: type[AbstractLevelModel] = eqx.field(static=True, default=LEVEL_MODELS.get("steady"))
+    # the direction of vibration the contact kernel assumes (no parameters of its own)
+    direction: type[AbstractDirection] = eqx.field(
+        static=True, default=DIRECTIONS.get(DEFAULT_DIRECTION)
+    )
     # the user's fixed values, bounds, scales, starts and priors (:mod:`._settings`)
     settings: tuple[ParameterSetting, ...] = eqx.field(static=True, default=())
 
@@ -216,14 +223,22 @@ class BenchModel(eqx.Module):
 
     def friction_ratios(self, v: Mapping[str, Array], load_n, alpha, speed_m_s) -> Array:
         """FR at operating points (arrays of equal shape) from physical values ``v``
-        (notes §3, §5): the cycle-averaged contact at the coupling's slip amplitude."""
+        (notes §3, §5): the cycle-averaged contact at the coupling's amplitude, in the
+        model's direction of vibration."""
         coupling = self.coupling_of(v)
         d = self.data
 
         def one(n, a, s):
             law = self.law_at(v, n)
             return on_friction_ratio(
-                law, coupling, n, a, s, d.vibration_frequency_hz, d.max_amplitude_m
+                law,
+                coupling,
+                n,
+                a,
+                s,
+                d.vibration_frequency_hz,
+                d.max_amplitude_m,
+                self.direction,
             )
 
         shape = jnp.shape(load_n)
@@ -339,11 +354,16 @@ def bench_model(
     offset: str | type[AbstractOffset] = DEFAULT_OFFSET,
     settings: tuple[ParameterSetting, ...] = (),
     level: str | type[AbstractLevelModel] = DEFAULT_LEVEL_MODEL,
+    direction: str | type[AbstractDirection] = DEFAULT_DIRECTION,
 ) -> BenchModel:
     """The :class:`BenchModel` of prepared ``data``; laws and models by registered name
     or class; ``settings``: the user's fixed values, bounds, scales, starts and priors
     (:mod:`idtool._model._settings`; those naming parameters this model lacks are
-    ignored).
+    ignored); ``direction``: of the vibration (:data:`DIRECTIONS`).
+
+    Raises:
+        IdtoolError: a coupling law in which the contact loads the horn (``sdof``: it
+            solves its balance with the along kernel) with another direction.
 
     The per-trace nuisances and ``mu`` and the slopes start from values read off the
     traces (:func:`idtool._data._blocks.start_values`), unless the user gives a start;
@@ -355,6 +375,12 @@ def bench_model(
     actuator_cls = ACTUATORS.get(actuator)
     offset_cls = OFFSETS.get(offset)
     level_cls = LEVEL_MODELS.get(level)
+    direction_cls = DIRECTIONS.get(direction)
+    if direction_cls is not DIRECTIONS.get(DEFAULT_DIRECTION) and reacts_on_vibration(coupling_cls):
+        raise IdtoolError(
+            f"the {coupling_cls.name} coupling law solves the horn loaded by friction along "
+            f"the sliding; with direction {direction_cls.name!r} choose another coupling law"
+        )
     groups_of_trace = _trace_groups(offset_cls, level_cls)
     s = start_values(data)
     # the rig's values for the coupling (a transducer's), unless the user set them
@@ -386,4 +412,11 @@ def bench_model(
         offset=offset_cls,
         level=level_cls,
         settings=settings,
+        direction=direction_cls,
     )
+
+
+def reacts_on_vibration(coupling: type[AbstractCoupling]) -> bool:
+    """Whether the contact loads the vibration in ``coupling`` (it overrides
+    :meth:`AbstractCoupling.slip_amplitude_m`: ``sdof``)."""
+    return coupling.slip_amplitude_m is not AbstractCoupling.slip_amplitude_m

@@ -34,7 +34,9 @@ Coulomb (``Kt -> inf``, ``fb = Fc e``) has the closed form (model notes §4)
     FR = <xi / sqrt(xi^2 + cos^2 theta)> = (2/pi) xi / sqrt(1 + xi^2) K(1 / (1 + xi^2))   (eq. T4)
 
 with K the complete elliptic integral of the first kind of *parameter* m
-(``scipy.special.ellipk(m)``; :func:`ellipk`); the grid's sum is the midpoint rule of a
+(``scipy.special.ellipk(m)``'s convention;
+:func:`idtool._model._limits.coulomb_perpendicular_friction_ratio` in JAX, by the
+arithmetic-geometric mean); the grid's sum is the midpoint rule of a
 periodic analytic function, which converges geometrically: within 1e-12 of eq. T4 for
 xi >= 0.01 at the default ``n_phase`` (tests/test_direction.py). Unlike the along
 direction, FR < 1 at every xi: a transverse vibration always tilts the slip velocity.
@@ -55,41 +57,13 @@ from idtool._model._contact import CycleAverage
 from idtool._model._direction import DIRECTIONS, AbstractDirection
 from idtool._model._laws import AbstractFrictionLaw
 
-__all__ = [
-    "N_PHASE_TRANSVERSE",
-    "Transverse",
-    "ellipk",
-    "transverse_coulomb_ratio",
-    "transverse_cycle_average",
-]
+__all__ = ["N_PHASE_TRANSVERSE", "Transverse", "transverse_cycle_average"]
 
 # Steps over half a period. The Dahl friction ratio's error is second order in the step:
 # at 256 it is below 6e-6 over Lambda 0.3-100 and xi 0.02-2 (2e-6 at Lambda 3, xi 0.2;
 # against 2048 steps and LSODA, tests/test_direction.py), Coulomb's below 1e-12 for
 # xi >= 0.01 (the grid's geometric convergence).
 N_PHASE_TRANSVERSE = 256
-_AGM_STEPS = 8  # the AGM converges quadratically: 8 steps reach 1e-16 for m <= 1 - 1e-12
-
-
-def ellipk(m: Float[ArrayLike, "*b"]) -> Float[Array, "*b"]:
-    """Complete elliptic integral of the first kind, ``K(m)``, of parameter ``m < 1``.
-
-    ``K(m) = int_0^{pi/2} dt / sqrt(1 - m sin^2 t) = pi / (2 AGM(1, sqrt(1 - m)))``
-    (Abramowitz & Stegun 17.6.1), the arithmetic-geometric mean run for a fixed
-    number of steps: jittable and differentiable (``scipy.special.ellipk``'s
-    convention). Diverges as ``m -> 1`` (``K ~ ln(4 / sqrt(1 - m))``).
-    """
-    a = jnp.ones_like(jnp.asarray(m, float))
-    g = jnp.sqrt(1.0 - jnp.asarray(m, float))
-    for _ in range(_AGM_STEPS):
-        a, g = 0.5 * (a + g), jnp.sqrt(a * g)
-    return 0.5 * jnp.pi / a
-
-
-def transverse_coulomb_ratio(velocity_ratio: Float[ArrayLike, "*b"]) -> Float[Array, "*b"]:
-    """Coulomb friction ratio under transverse in-plane vibration, eq. T4 (VR = xi > 0)."""
-    xi = jnp.asarray(velocity_ratio, float)
-    return 2.0 / jnp.pi * xi / jnp.sqrt(1.0 + xi**2) * ellipk(1.0 / (1.0 + xi**2))
 
 
 def _phase_map(phi: Array, r: Array) -> tuple[Array, Array]:

@@ -4,7 +4,9 @@ A candidate of the model choice is named in ``fit.json`` (``model_comparison``,
 ``coupling_laws``) and in the run's progress by its key ``law/coupling/actuator/offset``,
 then ``/level`` unless the levels are steady (so keys stay what they were before the
 level models). :meth:`ModelSpec.key` writes it and :meth:`ModelSpec.from_key` reads it:
-the one place the key's format lives, everything else passes the record.
+the one place the key's format lives, everything else passes the record. The key names
+neither the noise model nor the direction of vibration: every candidate of a run shares
+them.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ import dataclasses
 
 from idtool._data._blocks import FitData
 from idtool._model._benchmodel import BenchModel, bench_model
-from idtool._model._names import DEFAULT_NOISE
+from idtool._model._names import DEFAULT_DIRECTION, DEFAULT_NOISE
 from idtool._model._settings import ParameterSetting
 
 __all__ = ["ModelSpec"]
@@ -26,7 +28,8 @@ _STEADY = "steady"
 @dataclasses.dataclass(frozen=True)
 class ModelSpec:
     """Which model a fit is, by registered name: friction law, coupling law, noise,
-    actuator, offset and level models, and the user's parameter settings."""
+    actuator, offset and level models, the user's parameter settings and the direction
+    of vibration."""
 
     law: str
     coupling: str
@@ -35,6 +38,7 @@ class ModelSpec:
     offset: str
     level: str
     settings: tuple[ParameterSetting, ...] = ()
+    direction: str = DEFAULT_DIRECTION
 
     @property
     def key(self) -> str:
@@ -51,13 +55,14 @@ class ModelSpec:
         key: str,
         noise: str = DEFAULT_NOISE,
         settings: tuple[ParameterSetting, ...] = (),
+        direction: str = DEFAULT_DIRECTION,
     ) -> ModelSpec:
         """The spec named by ``key`` (:attr:`key`; a key of four parts, written before
-        the level models, has steady levels), with the ``noise`` model and ``settings``
-        the key does not name."""
+        the level models, has steady levels), with the ``noise`` model, ``settings`` and
+        ``direction`` the key does not name."""
         law, coupling, actuator, offset, *rest = key.split(_SEPARATOR)
         level = rest[0] if rest else _STEADY
-        return cls(law, coupling, noise, actuator, offset, level, settings)
+        return cls(law, coupling, noise, actuator, offset, level, settings, direction)
 
     def build(self, data: FitData) -> BenchModel:
         """The :class:`BenchModel` of ``data`` this spec names."""
@@ -70,4 +75,5 @@ class ModelSpec:
             self.offset,
             self.settings,
             self.level,
+            self.direction,
         )

@@ -23,7 +23,6 @@ import numpy as np
 from idtool._fit._discrepancy import discrepancy_moments, operating_coordinates
 from idtool._model._bench import on_contact
 from idtool._model._benchmodel import BenchModel
-from idtool._model._contact import prescribed_cycle_average
 from idtool._predict._predict import Draws, _band
 
 __all__ = ["AmplitudeFor", "amplitude_for_reduction"]
@@ -114,7 +113,7 @@ def _amplitude_draws(model: BenchModel, v, load, speed, target_fr, kriging, xi):
             return jnp.minimum(fr * jnp.exp(mean[0] + jnp.sqrt(var[0]) * xi), 1.0)
 
         def at(a):  # (mean FR, command) at slip amplitude a
-            cycle = prescribed_cycle_average(law, speed, a, w)
+            cycle = model.direction.cycle_average(law, speed, a, w, load)
             alpha = coupling.drive_fraction(law, a, cycle, load, w, d.max_amplitude_m)
             return mean_fr(cycle.friction_ratio, alpha), alpha
 
@@ -126,7 +125,14 @@ def _amplitude_draws(model: BenchModel, v, load, speed, target_fr, kriging, xi):
 
         one = jnp.asarray(1.0)
         fr_full, a_full = on_contact(
-            law, coupling, load, one, speed, d.vibration_frequency_hz, d.max_amplitude_m
+            law,
+            coupling,
+            load,
+            one,
+            speed,
+            d.vibration_frequency_hz,
+            d.max_amplitude_m,
+            model.direction,
         )
         fr_full = mean_fr(fr_full, one)
         lo, hi = jax.lax.fori_loop(0, _BISECTIONS, step, (jnp.zeros_like(a_full), a_full))

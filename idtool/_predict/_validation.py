@@ -172,6 +172,7 @@ def _model_for(model: BenchModel, dataset: Dataset) -> BenchModel:
         model.actuator,
         model.offset,
         level=model.level,
+        direction=model.direction,
     )
 
 

@@ -121,6 +121,11 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
             "parameters": [p.name for p in r.model.level.fit_params],
             "trace_parameters": [name for name, _, _ in r.model.level.trace_params],
         },
+        # the direction of vibration the contact kernel assumes (no parameters)
+        "direction": {
+            "name": r.model.direction.name,
+            "description": r.model.direction.description,
+        },
         "aic": r.aic,
         "bic": r.bic,
         "loglik": r.loglik,
@@ -270,6 +275,12 @@ def _fmt(e: Estimate) -> str:
     return f"{e.estimate:12.5g} {e.unit:4s} +/- {e.std_error:9.3g} {rel:9s} {e.statement}{flag}"
 
 
+def _direction_words(direction: str) -> str:
+    """The direction of vibration for the model line: nothing for the default (along:
+    the line stays what it was), else ", vibration NAME"."""
+    return "" if direction == "along" else f", vibration {direction}"
+
+
 def fit_report(run: FitRun) -> str:
     """A plain-text report: estimates, intervals, correlations, statistics, warnings."""
     r, d = run.chosen, run.data
@@ -279,7 +290,7 @@ def fit_report(run: FitRun) -> str:
         f"{d.n_blocks} block means of {d.block_size} samples",
         f"    model        {r.model.law.name} friction, {r.model.coupling.name} coupling, "
         f"{r.model.actuator.name} actuator, {r.model.offset.name} load-cell offset, "
-        f"{r.model.level.name} levels",
+        f"{r.model.level.name} levels{_direction_words(r.model.direction.name)}",
         f"    choice       {run.reason}",
         f"    noise        {r.model.noise.description} ({r.model.noise.name}), "
         + "".join(f"{k} = {v:.3f}, " for k, v in _noise_state_shown(r).items())

@@ -185,6 +185,8 @@ def _model_line(fit: FitArtefact) -> str:
         f"{m.law.name} friction, {m.coupling.name} coupling, {m.actuator.name} actuator, "
         f"{m.offset.name} load-cell offset, {m.level.name} levels"
     )
+    if m.direction.name != "along":
+        line += f", vibration {m.direction.name}"
     if fit.alternates:
         weights = {law: w["bic_weight"] for law, w in fit.coupling_laws.items()}
         kept = [m.coupling.name, *fit.alternates]
