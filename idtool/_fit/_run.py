@@ -51,8 +51,8 @@ from idtool._fit._program import lm_arguments, lm_program
 from idtool._fit._result import FitResult
 from idtool._fit._with_levels import compile_variability, with_variability
 from idtool._model._actuator import ACTUATORS
-from idtool._model._benchmodel import bench_model, reacts_on_vibration, shared_params_of
-from idtool._model._coupling import COUPLINGS
+from idtool._model._benchmodel import bench_model, shared_params_of
+from idtool._model._coupling import COUPLINGS, reacts_on_vibration
 from idtool._model._directions import DIRECTIONS
 from idtool._model._laws import FRICTION_LAWS
 from idtool._model._level_model import LEVEL_MODELS
@@ -202,7 +202,7 @@ def fit_dataset(
     parameter; a setting that names none of them is an error. ``direction``: of the
     vibration (:data:`DIRECTIONS`), shared by every candidate; with another than along,
     ``coupling="auto"`` leaves out the coupling laws in which the contact loads the horn
-    (``sdof``: :func:`idtool._model._benchmodel.reacts_on_vibration`)."""
+    (``sdof``: :func:`idtool._model._coupling.reacts_on_vibration`)."""
     started = time.perf_counter()
 
     def say(what: str) -> None:

@@ -46,7 +46,7 @@ from idtool._data._start_values import start_values
 from idtool._errors import IdtoolError
 from idtool._model._actuator import ACTUATORS, DEFAULT_ACTUATOR, AbstractActuator
 from idtool._model._bench import TraceTiming, on_friction_ratio
-from idtool._model._coupling import COUPLINGS, AbstractCoupling
+from idtool._model._coupling import COUPLINGS, AbstractCoupling, reacts_on_vibration
 from idtool._model._directions import DEFAULT_DIRECTION, DIRECTIONS, AbstractDirection
 from idtool._model._laws import FRICTION_LAWS, MU, AbstractFrictionLaw
 from idtool._model._level_model import DEFAULT_LEVEL_MODEL, LEVEL_MODELS, AbstractLevelModel
@@ -57,7 +57,7 @@ from idtool._model._params import Param
 from idtool._model._settings import ParameterSetting, apply_settings, fixed_values
 from idtool._model._xp import xp
 
-__all__ = ["TRACE_GROUPS", "BenchModel", "bench_model", "reacts_on_vibration", "shared_params_of"]
+__all__ = ["TRACE_GROUPS", "BenchModel", "bench_model", "shared_params_of"]
 
 # Per-trace nuisances of every model, after the offset model's: name, unit, internal
 # scale. The horn's lag behind the logged flag differs at switch-on and switch-off (each
@@ -414,9 +414,3 @@ def bench_model(
         settings=settings,
         direction=direction_cls,
     )
-
-
-def reacts_on_vibration(coupling: type[AbstractCoupling]) -> bool:
-    """Whether the contact loads the vibration in ``coupling`` (it overrides
-    :meth:`AbstractCoupling.slip_amplitude_m`: ``sdof``)."""
-    return coupling.slip_amplitude_m is not AbstractCoupling.slip_amplitude_m

@@ -52,6 +52,7 @@ __all__ = [
     "PowerLimitedCoupling",
     "SdofCoupling",
     "load_scale_param",
+    "reacts_on_vibration",
 ]
 
 COUPLINGS: Registry[type[AbstractCoupling]] = Registry("coupling law")
@@ -174,6 +175,13 @@ class AbstractCoupling(eqx.Module):
 
         lo, hi = jax.lax.fori_loop(0, 52, step, (jnp.asarray(0.0), jnp.asarray(1.0)))
         return 0.5 * (lo + hi)
+
+
+def reacts_on_vibration(coupling: type[AbstractCoupling]) -> bool:
+    """Whether the contact loads the vibration in ``coupling``: it overrides
+    :meth:`AbstractCoupling.slip_amplitude_m` (``sdof``, whose balance reads the along
+    kernel's harmonics, so it goes with vibration along the sliding only)."""
+    return coupling.slip_amplitude_m is not AbstractCoupling.slip_amplitude_m
 
 
 def load_scale_param(name: str, description: str, hi: float = 1e5) -> Param:
