@@ -399,3 +399,16 @@ def test_fit_records_the_direction_and_reads_it_back(tmp_path):
             fit.artefact.chosen.model.friction_ratios(v, d.op_load_n, d.op_alpha, d.op_speed_m_s)
         ),
     )
+
+
+def test_the_stiffness_ratio_only_rescales_the_amplitude():
+    # eq. N1: (beta, vt) depend on KAPPA and a through a / KAPPA only
+    kt, a, v, w, n0, mu = 1e8, 2e-6, 0.025, TWO_PI * 20e3, 450.0, 0.3
+    for s in (0.5, 2.0):
+        beta = kt * a / (KAPPA * n0)
+        vt = KAPPA * v / (a * w) / mu
+        beta_s = kt * (s * a) / (s * KAPPA * n0)
+        vt_s = s * KAPPA * v / (s * a * w) / mu
+        assert float(idtool.normal_friction_ratio(beta_s, vt_s)) == pytest.approx(
+            float(idtool.normal_friction_ratio(beta, vt)), abs=1e-15
+        )

@@ -23,8 +23,9 @@ contact-mechanical perspective", Front. Mech. Eng. 6:69 (2020). Assumptions:
   elastic-perfectly plastic, as in the paper;
 * ``k_x / k_z = KAPPA = 2 (1 - nu) / (2 - nu)`` (Mindlin 1949; Johnson, Contact
   Mechanics 1985, §7.2: like elastic bodies), here with ``nu = 0.4`` (a polymer
-  webbing): ``KAPPA = 0.75``. KAPPA only rescales the coupling gain a fit identifies
-  (module :func:`normal_friction_ratio`): FR, and so Kt and mu, do not depend on it.
+  webbing): ``KAPPA = 0.75``. KAPPA only rescales the coupling gain a fit identifies:
+  FR depends on ``(beta, vt)`` of eq. N1, which ``KAPPA -> s KAPPA`` with ``a -> s a``
+  leaves unchanged, so Kt and mu do not depend on it.
 
 Dimensionless (``n = N / N0``, ``f = F / (mu N0)``):
 
