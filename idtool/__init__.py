@@ -136,6 +136,12 @@ _LAZY = {
     "simulate_series": "idtool._simulate._series",
     "fit_law": "idtool._lawfit._api",
     "SeriesFit": "idtool._lawfit._result",
+    "LevelsTable": "idtool._data._levels",
+    "load_levels": "idtool._data._levels",
+    "import_levels": "idtool._data._levels_read",
+    "fit_levels": "idtool._levels._api",
+    "LevelsFit": "idtool._levels._result",
+    "LevelsPrediction": "idtool._levels._result",
 }
 
 # The one list of public names: __all__ is read from it, and the TYPE_CHECKING block
@@ -177,6 +183,13 @@ if TYPE_CHECKING:
     from idtool._data._import import (
         import_daq as import_daq,
     )
+    from idtool._data._levels import (
+        LevelsTable as LevelsTable,
+        load_levels as load_levels,
+    )
+    from idtool._data._levels_read import (
+        import_levels as import_levels,
+    )
     from idtool._data._series import (
         read_series as read_series,
         Series as Series,
@@ -207,6 +220,13 @@ if TYPE_CHECKING:
     )
     from idtool._lawfit._result import (
         SeriesFit as SeriesFit,
+    )
+    from idtool._levels._api import (
+        fit_levels as fit_levels,
+    )
+    from idtool._levels._result import (
+        LevelsFit as LevelsFit,
+        LevelsPrediction as LevelsPrediction,
     )
     from idtool._model._actuator import (
         AbstractActuator as AbstractActuator,

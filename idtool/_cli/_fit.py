@@ -11,6 +11,7 @@ from pathlib import Path
 import idtool
 from idtool._atomic import refuse_existing
 from idtool._cli._args import add_law_argument, load_numerics, registry_names
+from idtool._errors import IdtoolError
 from idtool._model._names import BY_DESIGN, DEFAULT_DIRECTION, DEFAULT_NOISE
 from idtool._plotting import MODULES, import_in_background
 
@@ -27,6 +28,10 @@ def _run(args: argparse.Namespace) -> int:
 
     started = time.perf_counter()
     refuse_existing(args.out, args.force)  # before minutes of fitting, not after
+    from idtool._data._levels import is_levels_dataset
+
+    if is_levels_dataset(args.dataset):
+        return _run_levels(args, started)
     dataset = idtool.load_dataset(Path(args.dataset))
     for w in dataset.warnings:  # on stderr: stdout may be the --json document
         print(f"idtool fit: {w}", file=sys.stderr)
@@ -61,6 +66,40 @@ def _run(args: argparse.Namespace) -> int:
     print(
         f"wrote {args.out}/ (fit.json, report.txt, traces.png, residuals.png) in "
         f"{time.perf_counter() - started:.1f} s"
+    )
+    return 0
+
+
+def _run_levels(args: argparse.Namespace, started: float) -> int:
+    """A steady-state friction table (kind: levels): :func:`idtool.fit_levels`; the
+    trace fit's options that a table has no use for are refused, not ignored."""
+    unused = [
+        f"--{name.replace('_', '-')}"
+        for name in ("noise", "actuator", "offset", "level", "traces", "parameters", "fix")
+        if getattr(args, name, None) not in (None, "auto", DEFAULT_NOISE, False)
+    ]
+    if args.coupling == "auto":
+        unused.append("--coupling auto")
+    if unused:
+        raise IdtoolError(
+            f"{args.dataset} is a friction table (kind: levels): {', '.join(unused)} "
+            "apply to traces only; leave them out"
+        )
+    fit = idtool.fit_levels(
+        args.dataset,
+        law=args.law,
+        coupling=args.coupling,
+        direction=args.direction,
+        seed=args.seed,
+    )
+    fit.save(args.out, force=args.force)
+    if args.json:
+        print(json.dumps(fit.to_json(), indent=1))
+        return 0
+    print(fit.report())
+    figure = ", fr_vs_speed.png" if fit.spans_speeds else ""
+    print(
+        f"wrote {args.out}/ (fit.json, report.txt{figure}) in {time.perf_counter() - started:.1f} s"
     )
     return 0
 

@@ -35,6 +35,7 @@ _COMMANDS = (
     "_seed_study",
     "_validate",
     "_import",
+    "_import_levels",
     "_simulate_bench",
     "_parameters",
     "_fit",

@@ -24,6 +24,7 @@ from idtool._errors import Problem
 __all__ = [
     "DATASET_SCHEMA",
     "FIT_SCHEMA",
+    "LEVELS_SCHEMA",
     "SAMPLE_SCHEMA",
     "SIMULATOR_PARAMS_SCHEMA",
     "TRACE_TABLE_SCHEMA",
@@ -42,6 +43,7 @@ SIMULATOR_PARAMS_SCHEMA = "simulator_params.schema.json"
 FIT_SCHEMA = "fit.schema.json"  # fit.json (idtool._fit._folder.FIT_JSON)
 SAMPLE_SCHEMA = "sample.schema.json"  # sample.json (idtool._fit._folder.SAMPLE_JSON)
 VALIDATION_SCHEMA = "validation.schema.json"  # validation.json (_folder.VALIDATION_JSON)
+LEVELS_SCHEMA = "levels_table.schema.json"  # dataset.json of kind "levels" (._levels)
 _ALL = (
     DATASET_SCHEMA,
     TRACE_TABLE_SCHEMA,
@@ -49,6 +51,7 @@ _ALL = (
     FIT_SCHEMA,
     SAMPLE_SCHEMA,
     VALIDATION_SCHEMA,
+    LEVELS_SCHEMA,
 )
 
 

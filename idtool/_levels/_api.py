@@ -1,0 +1,131 @@
+""":func:`fit_levels`: Kt, mu and the coupling from a steady-state friction table, the
+public entry point behind ``idtool fit`` on a dataset of kind ``levels``."""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from idtool._data._levels import LevelsTable, load_levels
+from idtool._fit._variability import MISFIT, MISSPECIFIED_SD
+from idtool._lawfit._result import estimate_from_sides
+from idtool._levels._estimate import estimate, profile_sides
+from idtool._levels._model import DEFAULT_LAW, LevelsModel, levels_model
+from idtool._levels._result import LevelsFit
+from idtool._model._names import DEFAULT_COUPLING, DEFAULT_DIRECTION
+
+__all__ = ["fit_levels"]
+
+_NULL_LOADING = 0.1  # a parameter this much in an uninformed direction is not pinned
+
+
+def fit_levels(
+    table: LevelsTable | str | Path,
+    *,
+    law: str = DEFAULT_LAW,
+    coupling: str = DEFAULT_COUPLING,
+    direction: str = DEFAULT_DIRECTION,
+    seed: int = 0,
+) -> LevelsFit:
+    """Fit Kt, mu and the coupling law to a steady-state friction table.
+
+    The rows' log OFF levels give mu (``mu = F_off / N``, or the coefficient itself),
+    their friction ratios ``FR = ON / OFF`` the contact stiffness and the coupling, both
+    through the registered friction and coupling laws (:mod:`idtool._levels._model`).
+    Pull-to-pull scatter and model discrepancy are estimated as in the trace fit's
+    levels model, the table's standard errors taken as known measurement variance
+    (:mod:`idtool._levels._estimate`). Each interval is Wald where the profile
+    likelihood agrees, else the profile's, one-sided or "not identified" where the
+    table does not bound the parameter; a warning names the parameters the table
+    cannot pin apart.
+
+    Args:
+        table: a :class:`LevelsTable`, or the folder (or ``dataset.json``) of a
+            dataset of kind ``levels`` (``idtool import-levels``).
+        law, coupling, direction: registered names (defaults as :func:`idtool.fit`'s:
+            Dahl, the power-limited coupling, vibration along the sliding).
+        seed: of the multi-start.
+
+    Returns:
+        The :class:`LevelsFit`.
+
+    Raises:
+        IdtoolError: an invalid dataset (located problems) or an unknown name.
+    """
+    if not isinstance(table, LevelsTable):
+        table = load_levels(table)
+    start = time.perf_counter()
+    coupling = DEFAULT_COUPLING if coupling == "by-design" else coupling
+    model = levels_model(table, law, coupling, direction)
+    opt = estimate(model, seed=seed)
+    estimates, sides = {}, {}
+    se_z = np.sqrt(np.maximum(np.diag(opt.cov_theta), 0.0))
+    for j, p in enumerate(model.params):
+        lo, hi = profile_sides(model, opt, j)
+        sides[p.name] = (lo, hi)
+        se = float(se_z[j]) if lo.method == hi.method == "wald" else math.inf
+        estimates[p.name] = estimate_from_sides(p, float(opt.theta[j]), se, lo, hi)
+    fit = LevelsFit(model, opt, estimates, sides, (), (), 0.0)
+    warnings, notes = _diagnose(fit)
+    return LevelsFit(model, opt, estimates, sides, warnings, notes, time.perf_counter() - start)
+
+
+def _diagnose(fit: LevelsFit) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    model: LevelsModel = fit.model
+    t, o = model.table, fit.optimum
+    warnings, notes = [], []
+    names = model.names
+    if o.null.shape[1]:
+        loose = [names[j] for j in range(len(names)) if np.max(np.abs(o.null[j])) > _NULL_LOADING]
+        points = {(n, a) for n, a in zip(t.normal_load_n, t.amplitude_m, strict=True)}
+        speeds = np.unique(t.sliding_speed_m_s).size
+        n_coupling = len(model.params) - names.index("mu") - 1
+        text = (
+            f"the table cannot pin {', '.join(loose)} apart: {t.operating_points[1].size} "
+            f"condition(s), {len(points)} load-amplitude point(s) at {speeds} speed(s), "
+            f"for {len(names)} parameters; only a combination of them is informed, the "
+            "intervals of each say how far the table bounds it"
+        )
+        if len(points) <= n_coupling:
+            text += (
+                f"; {len(points)} load-amplitude point(s) cannot pin a {n_coupling}-"
+                f"parameter coupling law ({model.coupling}): add loads or amplitudes, or "
+                "fit --coupling constant"
+            )
+        warnings.append(text)
+    open_sides = [n for n, e in fit.estimates.items() if e.one_sided]
+    if open_sides:
+        warnings.append(
+            "not bounded by the table on both sides: "
+            + "; ".join(f"{n} {fit.estimates[n].statement}" for n in open_sides)
+        )
+    disc = o.sds["discrepancy_fr"]
+    if disc > MISSPECIFIED_SD:
+        warnings.append(
+            f"{MISFIT} the conditions by {100 * disc:.0f}% in friction ratio "
+            "(discrepancy sd): the bands carry it, but the estimates are read through "
+            "the model's shape; compare another direction or coupling law"
+        )
+    fitted = fit.fitted_fr
+    flat = (fitted > 0.99) & (t.friction_ratio < 0.95)
+    for i in np.flatnonzero(flat):
+        warnings.append(
+            f"{MISFIT} row {i + 1}: no reduction in the model (the sliding outruns the "
+            f"vibration, velocity ratio >= 1) where the table has FR "
+            f"{t.friction_ratio[i]:.3f} at {t.sliding_speed_m_s[i] * 1e3:.4g} mm/s"
+        )
+    if not o.active[1]:
+        notes.append(
+            "one row per condition: pull-to-pull scatter and model discrepancy cannot be "
+            "told apart; discrepancy_fr is their sum"
+        )
+    if not np.any(np.isfinite(t.off_se) | np.isfinite(t.on_se)):
+        notes.append("no standard errors given: the measurement variance is in the sds")
+    if not o.restricted:
+        notes.append(
+            "the sds by maximum likelihood (no residual degrees of freedom for REML): biased low"
+        )
+    return tuple(warnings), tuple(notes)

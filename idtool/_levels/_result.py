@@ -1,0 +1,298 @@
+"""What a fit of a steady-state friction table found: :class:`LevelsFit`, its text
+report, predictions with bands, ``fit.json`` and the figure of FR against speed."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from idtool._atomic import atomic_output_dir
+from idtool._fit._result import Estimate
+from idtool._lawfit._profile import Side
+from idtool._levels._estimate import SD_NAMES, Optimum
+from idtool._levels._model import LevelsModel
+from idtool._version import __version__
+
+__all__ = ["SCHEMA_VERSION", "LevelsFit", "LevelsPrediction"]
+
+SCHEMA_VERSION = "1"
+FIT_JSON, REPORT_TXT, FIGURE = "fit.json", "report.txt", "fr_vs_speed.png"
+# A prediction moved by more than this (relative FR) along a direction of the
+# parameters the table does not inform is not bounded by the data.
+UNPINNED_FR = 0.01
+
+
+@dataclasses.dataclass(frozen=True)
+class LevelsPrediction:
+    """Friction ratios predicted at operating points, with 95% bands.
+
+    Attributes:
+        load_n, amplitude_m, speed_m_s, frequency_hz: the points (arrays of one shape).
+        fr: the model's FR at the estimate [-].
+        mean_band: ``(lo, hi)`` of FR at a new condition: the parameters' uncertainty
+            and the model discrepancy [-].
+        next_band: ``(lo, hi)`` of the next measurement: plus the pull-to-pull scatter.
+        pinned: False where the table does not bound the prediction (it moves along a
+            direction of the parameters the data do not inform); its bands are NaN.
+    """
+
+    load_n: np.ndarray
+    amplitude_m: np.ndarray
+    speed_m_s: np.ndarray
+    frequency_hz: np.ndarray
+    fr: np.ndarray
+    mean_band: tuple[np.ndarray, np.ndarray]
+    next_band: tuple[np.ndarray, np.ndarray]
+    pinned: np.ndarray
+
+    def to_rows(self) -> list[dict[str, Any]]:
+        """One dict per point (SI units), for JSON and tables."""
+        out = []
+        for i in range(self.fr.size):
+            out.append(
+                {
+                    "normal_load_n": float(self.load_n.flat[i]),
+                    "amplitude_m": float(self.amplitude_m.flat[i]),
+                    "sliding_speed_m_s": float(self.speed_m_s.flat[i]),
+                    "vibration_frequency_hz": float(self.frequency_hz.flat[i]),
+                    "fr": float(self.fr.flat[i]),
+                    "fr_mean_ci95": [float(b.flat[i]) for b in self.mean_band],
+                    "fr_next_ci95": [float(b.flat[i]) for b in self.next_band],
+                    "pinned": bool(self.pinned.flat[i]),
+                }
+            )
+        return out
+
+
+@dataclasses.dataclass(frozen=True)
+class LevelsFit:
+    """Kt, mu and the coupling fitted to a steady-state friction table
+    (:func:`idtool.fit_levels`).
+
+    Attributes:
+        model: the table and the physical model (law, coupling, direction).
+        optimum: estimate, covariance, sds, uninformed directions.
+        estimates: each physical parameter's :class:`~idtool.Estimate` by name.
+        sides: each parameter's interval ends and how they were found.
+        warnings: what the reader must know (unpinned parameters, misfit).
+        notes: facts of the design (no repeats: scatter and discrepancy summed).
+        seconds: wall time of the fit [s].
+    """
+
+    model: LevelsModel
+    optimum: Optimum
+    estimates: dict[str, Estimate]
+    sides: dict[str, tuple[Side, Side]]
+    warnings: tuple[str, ...]
+    notes: tuple[str, ...]
+    seconds: float
+
+    @property
+    def table(self):
+        return self.model.table
+
+    @property
+    def fitted_fr(self) -> np.ndarray:
+        """The model's FR at every row of the table [-]."""
+        n = self.table.n_rows
+        return np.exp(np.asarray(self.model.log_levels(self.optimum.theta))[n:])
+
+    def predict(
+        self,
+        load_n,
+        speed_m_s,
+        *,
+        amplitude_m=None,
+        amplitude_fraction=None,
+        frequency_hz=None,
+    ) -> LevelsPrediction:
+        """FR at loads [N], speeds [m/s] and amplitudes (in metres, or as fractions of
+        the table's reference amplitude), broadcast together; ``frequency_hz`` [Hz]
+        defaults to the table's (the first row's). Bands from the parameters'
+        covariance (delta method on log FR) and the discrepancy sd; the next
+        measurement's adds the scatter sd."""
+        t = self.table
+        if (amplitude_m is None) == (amplitude_fraction is None):
+            raise ValueError("give amplitude_m or amplitude_fraction")
+        if amplitude_m is None:
+            amplitude_m = np.asarray(amplitude_fraction, float) * t.reference_amplitude_m
+        f = t.vibration_frequency_hz[0] if frequency_hz is None else frequency_hz
+        n, a, v, f = np.broadcast_arrays(
+            *(np.asarray(x, float) for x in (load_n, amplitude_m, speed_m_s, f))
+        )
+        alpha = a / t.reference_amplitude_m
+        import jax
+
+        theta = self.optimum.theta
+        fr = np.asarray(self.model.fr_at(theta, n, alpha, v, f))
+        jac = np.asarray(jax.jacfwd(self.model.fr_at)(theta, n, alpha, v, f)).reshape(fr.size, -1)
+        jl = jac / np.maximum(fr.reshape(-1, 1), 1e-300)  # d log FR / d theta
+        var = np.einsum("ik,kl,il->i", jl, self.optimum.cov_theta, jl).reshape(fr.shape)
+        sds = self.optimum.sds
+        mean_sd = np.sqrt(var + sds["discrepancy_fr"] ** 2)
+        next_sd = np.sqrt(mean_sd**2 + sds["scatter_fr"] ** 2)
+        null = self.optimum.null
+        moved = np.max(np.abs(jl @ null), axis=1) if null.shape[1] else np.zeros(fr.size)
+        pinned = (moved <= UNPINNED_FR).reshape(fr.shape)
+
+        def band(sd):
+            lo, hi = fr * np.exp(-1.96 * sd), fr * np.exp(1.96 * sd)
+            return np.where(pinned, lo, np.nan), np.where(pinned, hi, np.nan)
+
+        return LevelsPrediction(n, a, v, f, fr, band(mean_sd), band(next_sd), pinned)
+
+    # ------------------------------------------------------------------ outputs
+    def report(self) -> str:
+        """The text report: data, model, estimates with their statements, sds,
+        warnings, and the table against the fit."""
+        t, m, o = self.table, self.model, self.optimum
+        lines = [
+            f"idtool {__version__}: fit of a steady-state friction table (kind: levels)",
+            f"dataset   {t.name} ({t.material}); {t.n_rows} rows, "
+            f"{t.operating_points[1].size} conditions; friction as {t.friction}",
+        ]
+        if t.source:
+            lines.append(f"source    {t.source}")
+        lines += [
+            f"model     law {m.law}, coupling {m.coupling}, direction {m.direction}; "
+            f"amplitude fraction = amplitude / {t.reference_amplitude_m * 1e6:g} um",
+            "",
+            "[[Estimates]] (95% intervals: Wald, checked against the profile likelihood)",
+        ]
+        for name, e in self.estimates.items():
+            lines.append(f"  {name:15s} {e.estimate:<12.5g} {e.unit:4s} {e.statement}")
+        lines += [
+            "",
+            f"[[Scatter and discrepancy]] (relative sds, {'REML' if o.restricted else 'ML'})",
+        ]
+        for name in SD_NAMES:
+            tag = f"{100 * o.sds[name]:.2f}%" if o.sds[name] > 0 else "not estimated"
+            lines.append(f"  {name:15s} {tag}")
+        lines += ["", "[[Rows]] measured and fitted friction ratio"]
+        fit_fr = self.fitted_fr
+        for i in range(t.n_rows):
+            lines.append(
+                f"  N {t.normal_load_n[i]:8.4g} N  a {t.amplitude_m[i] * 1e6:7.3g} um  "
+                f"v {t.sliding_speed_m_s[i] * 1e3:7.4g} mm/s  "
+                f"f {t.vibration_frequency_hz[i] / 1e3:6.4g} kHz"
+                f"  FR {t.friction_ratio[i]:.3f}  fit {fit_fr[i]:.3f}"
+            )
+        if self.notes:
+            lines += ["", "[[Notes]]", *(f"  - {x}" for x in self.notes)]
+        if self.warnings:
+            lines += ["", "[[Warnings]]", *(f"  - {x}" for x in self.warnings)]
+        return "\n".join(lines)
+
+    fit_report = report
+
+    def to_json(self) -> dict[str, Any]:
+        """``fit.json``'s document."""
+        t, m, o = self.table, self.model, self.optimum
+        estimates = {}
+        for name, e in self.estimates.items():
+            lo, hi = self.sides[name]
+            estimates[name] = {
+                "value": e.estimate,
+                "unit": e.unit,
+                "std_error": None if not math.isfinite(e.std_error) else e.std_error,
+                "ci95": list(e.ci95),
+                "one_sided": e.one_sided,
+                "statement": e.statement,
+                "interval_method": [lo.method, hi.method],
+            }
+        fit_fr = self.fitted_fr
+        return {
+            "schema_version": SCHEMA_VERSION,
+            "kind": "levels",
+            "idtool_version": __version__,
+            "dataset": {
+                "name": t.name,
+                "material": t.material,
+                "source": t.source,
+                "path": None if t.path is None else str(t.path),
+                "sha256": t.sha256,
+                "friction": t.friction,
+                "n_rows": t.n_rows,
+                "reference_amplitude_m": t.reference_amplitude_m,
+            },
+            "model": {"law": m.law, "coupling": m.coupling, "direction": m.direction},
+            "estimates": estimates,
+            "sds": {**o.sds, "method": "REML" if o.restricted else "ML"},
+            "chi2": o.chi2,
+            "log_likelihood": o.loglik,
+            "theta_internal": [float(x) for x in o.theta],
+            "cov_internal": o.cov_theta.tolist(),
+            "rows": [
+                {"fr": float(t.friction_ratio[i]), "fr_fit": float(fit_fr[i])}
+                for i in range(t.n_rows)
+            ],
+            "warnings": list(self.warnings),
+            "notes": list(self.notes),
+            "seconds": self.seconds,
+        }
+
+    @property
+    def spans_speeds(self) -> bool:
+        return np.unique(self.table.sliding_speed_m_s).size > 1
+
+    def save(self, out: str | Path, *, force: bool = False) -> Path:
+        """Write ``fit.json``, ``report.txt`` and, when the table spans speeds,
+        ``fr_vs_speed.png`` into the folder ``out``, all or nothing."""
+        out = Path(out)
+        with atomic_output_dir(out, force=force) as tmp:
+            (tmp / FIT_JSON).write_text(json.dumps(self.to_json(), indent=1) + "\n")
+            (tmp / REPORT_TXT).write_text(self.report() + "\n")
+            if self.spans_speeds:
+                self.plot_speed(tmp / FIGURE)
+        return out
+
+    def plot_speed(self, path: str | Path) -> Path:
+        """FR against sliding speed for each load and amplitude of the table: the
+        model's curve, its 95% band at a new condition, the next measurement's, and the
+        rows (with their standard errors)."""
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        import matplotlib.pyplot as plt
+
+        t = self.table
+        v = t.sliding_speed_m_s
+        speeds = np.geomspace(0.5 * v.min(), 1.5 * v.max(), 60)
+        groups = sorted(
+            {(float(n), float(a)) for n, a in zip(t.normal_load_n, t.amplitude_m, strict=True)}
+        )
+        fig, ax = plt.subplots(figsize=(7.0, 4.5), dpi=120)
+        colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+        for k, (n, a) in enumerate(groups):
+            c = colours[k % len(colours)]
+            p = self.predict(n, speeds, amplitude_m=a)
+            label = f"{n:g} N, {a * 1e6:.3g} um"
+            ax.plot(speeds * 1e3, p.fr, color=c, label=label)
+            ax.fill_between(speeds * 1e3, *p.mean_band, color=c, alpha=0.25, lw=0)
+            ax.fill_between(speeds * 1e3, *p.next_band, color=c, alpha=0.10, lw=0)
+            rows = (t.normal_load_n == n) & (t.amplitude_m == a)
+            se = np.nan_to_num(t.friction_ratio * np.hypot(t.on_se / t.on, t.off_se / t.off))
+            ax.errorbar(
+                v[rows] * 1e3, t.friction_ratio[rows], yerr=1.96 * se[rows], fmt="o", color=c, ms=4
+            )
+        ax.set_xscale("log")
+        ax.set_xlabel("sliding speed [mm/s]")
+        ax.set_ylabel("friction ratio ON / OFF [-]")
+        ax.set_ylim(0.0, 1.1)
+        ax.set_title(
+            f"{t.name}: model ({self.model.law}, {self.model.coupling}), 95% bands", fontsize=10
+        )
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8, title="load, amplitude", title_fontsize=8)
+        fig.text(
+            0.01, 0.01, "dark band: FR at a new condition; light: next measurement", fontsize=7
+        )
+        fig.tight_layout()
+        fig.savefig(path)
+        plt.close(fig)
+        return Path(path)
