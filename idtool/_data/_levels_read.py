@@ -199,7 +199,7 @@ def read_levels_table(
     for i, row in enumerate(rows):
         for p in schema_problems(row, row_schema, file):
             column_name = header_of.get(p.column or "")
-            if column_name and (i + 1, column_name) not in reported:
+            if column_name and not {(i + 1, column_name), (0, column_name)} & reported:
                 problems.append(Problem(p.message, file=file, row=i + 1, column=column_name))
     return rows, kind, problems
 

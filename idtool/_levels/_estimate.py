@@ -199,7 +199,11 @@ def _null(info: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _alternate(model, y, m, kmat, active, theta, restricted):
-    """The sds (REML or ML) and theta (GLS) in turn until the sds settle."""
+    """The sds (REML or ML) and theta (GLS) in turn until the sds settle. Each theta
+    step starts both where theta is and at the multi-start's optimum (``theta`` on
+    entry), keeping the lower GLS cost: a plateau of the model (FR = 1 past VR = 1)
+    otherwise captured theta once the sds had widened."""
+    anchor = np.asarray(theta, float).copy()
     lo, hi = math.log(SD_FLOOR), math.log(SD_CEIL)
     log_sds = np.log(np.where(active, 0.03, 1.0))
     for _ in range(_ROUNDS):
@@ -215,7 +219,7 @@ def _alternate(model, y, m, kmat, active, theta, restricted):
         moved = np.max(np.abs(res.x - log_sds)[active])
         log_sds = res.x
         c = _cov(m, kmat, np.where(active, np.exp(log_sds), 0.0))
-        theta, _ = _solve(model, y, c, theta)
+        theta = min(_solve(model, y, c, theta), _solve(model, y, c, anchor), key=lambda x: x[1])[0]
         if moved < 1e-3:
             break
     return theta, log_sds
