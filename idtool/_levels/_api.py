@@ -45,8 +45,9 @@ def fit_levels(
     Args:
         table: a :class:`LevelsTable`, or the folder (or ``dataset.json``) of a
             dataset of kind ``levels`` (``idtool import-levels``).
-        law, coupling, direction: registered names (defaults as :func:`idtool.fit`'s:
-            Dahl, the power-limited coupling, vibration along the sliding).
+        law: registered friction law (default Dahl, as :func:`idtool.fit`'s).
+        coupling: registered coupling law (default the power limit).
+        direction: of the vibration (default along the sliding).
         seed: of the multi-start.
 
     Returns:
