@@ -261,3 +261,19 @@ def test_import_levels_help_does_not_load_jax():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
+
+
+def test_validate_summarises_a_table_and_the_trace_loader_points_to_it(tmp_path, capsys):
+    ds = tmp_path / "ds"
+    idtool.import_levels(dong_dapino(tmp_path), ds, material="steel", friction="coefficient")
+    capsys.readouterr()
+    assert main(["validate", str(ds)]) == 0
+    out = capsys.readouterr().out
+    assert "friction table: 2 row(s), 2 condition(s)" in out and "valid: no errors" in out
+    with pytest.raises(idtool.IdtoolError, match=r"friction table .*idtool.fit_levels"):
+        idtool.load_dataset(ds)
+    doc = json.loads((ds / "dataset.json").read_text())
+    doc["rows"][1]["sliding_speed_m_s"] = -1.0
+    (ds / "dataset.json").write_text(json.dumps(doc))
+    assert main(["validate", str(ds)]) == 2
+    assert "rows[1].sliding_speed_m_s" in capsys.readouterr().err

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import textwrap
+from typing import Any
 
 __all__ = ["register"]
 
@@ -16,7 +18,7 @@ Example: a table with units in its headers, one row per measurement,
   10,5,22,20.3,3.0,1.14,0.03,0.03,1
 
   idtool import-levels table.csv --out datasets/pin-on-disc --material "steel on steel" \\
-      --source "Dong & Dapino (2014)"
+      --source "Dong & Dapino, pin-on-disc at 22 kHz"
   idtool fit datasets/pin-on-disc --out fits/pin-on-disc"""
 
 
@@ -41,40 +43,48 @@ def _run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(table.to_document(), indent=1))
         return 0
-    _, first = table.operating_points
-    print(
-        f"imported {table.n_rows} row(s), {first.size} condition(s) as dataset "
-        f"'{table.name}' ({table.material}); friction as {table.friction}"
-    )
-    print(f"folder  {table.path}")
-    print(f"sha256  {table.sha256}")
-    print("  load [N]  amplitude [um]  frequency [Hz]  speed [mm/s]    OFF      ON     FR")
-    for i in range(table.n_rows):
-        print(
-            f"  {table.normal_load_n[i]:8.4g}  {table.amplitude_m[i] * 1e6:14.4g}  "
-            f"{table.vibration_frequency_hz[i]:14.6g}  {table.sliding_speed_m_s[i] * 1e3:12.4g}"
-            f"  {table.off[i]:6.4g}  {table.on[i]:6.4g}  {table.friction_ratio[i]:.3f}"
-        )
+    print(f"imported {levels_summary(table)}")
     print("valid: no errors")
     return 0
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    from idtool._cli._import import _Formatter  # the examples kept as written
+def levels_summary(table: Any) -> str:
+    """What ``import-levels`` and ``validate`` print about a :class:`idtool.LevelsTable`."""
+    _, first = table.operating_points
+    lines = [
+        f"{table.n_rows} row(s), {first.size} condition(s) as dataset '{table.name}' "
+        f"({table.material}); friction as {table.friction}",
+        f"folder  {table.path}",
+        f"sha256  {table.sha256}",
+        "  load [N]  amplitude [um]  frequency [Hz]  speed [mm/s]    OFF      ON     FR",
+    ]
+    for i in range(table.n_rows):
+        lines.append(
+            f"  {table.normal_load_n[i]:8.4g}  {table.amplitude_m[i] * 1e6:14.4g}  "
+            f"{table.vibration_frequency_hz[i]:14.6g}  {table.sliding_speed_m_s[i] * 1e3:12.4g}"
+            f"  {table.off[i]:6.4g}  {table.on[i]:6.4g}  {table.friction_ratio[i]:.3f}"
+        )
+    return "\n".join(lines)
 
+
+def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "import-levels",
         help="turn a table of steady OFF/ON friction per condition into a dataset",
-        formatter_class=_Formatter,
-        description="Turn a steady-state friction table (a tribometer's mean friction OFF "
-        "and ON at each condition, with repeats) into a validated dataset of kind 'levels' "
-        "(datasets_schema/levels_table.schema.json) that 'idtool fit' fits. Headers name "
-        "the columns and their units: load, amplitude (%%, fraction, m, mm, um, nm), "
-        "frequency (Hz, kHz), speed (m/s, mm/s), off and on (a force unit, or none for a "
-        "coefficient), optional off se, on se (standard errors) and repeat; values are "
-        "converted to SI. Written to a temporary folder, validated, then renamed into "
-        "place; on any problem nothing is written and every problem is listed with its "
-        f"file, row and column.\n\n{_EXAMPLE}",
+        formatter_class=argparse.RawDescriptionHelpFormatter,  # the example as written
+        description=textwrap.fill(
+            "Turn a steady-state friction table (a tribometer's mean friction OFF and ON at "
+            "each condition, with repeats) into a validated dataset of kind 'levels' "
+            "(datasets_schema/levels_table.schema.json) that 'idtool fit' fits. Headers "
+            "name the columns and their units: load, amplitude (%, fraction, m, mm, um, "
+            "nm), frequency (Hz, kHz), speed (m/s, mm/s), off and on (a force unit, or none "
+            "for a coefficient), optional off se, on se (standard errors) and repeat; "
+            "values are converted to SI. Written to a temporary folder, validated, then "
+            "renamed into place; on any problem nothing is written and every problem is "
+            "listed with its file, row and column.",
+            88,
+        )
+        + f"\n\n{_EXAMPLE}",
     )
     p.add_argument("table", help="the table (.csv, .txt, .parquet)")
     p.add_argument("--out", required=True, metavar="DIR", help="dataset folder to create")

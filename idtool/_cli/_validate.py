@@ -66,6 +66,18 @@ def dataset_summary(dataset: Dataset) -> dict[str, Any]:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from idtool._data._levels import is_levels_dataset, load_levels
+
+    if is_levels_dataset(args.dir):  # a friction table (kind: levels)
+        from idtool._cli._import_levels import levels_summary
+
+        table = load_levels(args.dir)
+        if args.json:
+            print(json.dumps(table.to_document(), indent=1))
+            return 0
+        print(f"friction table: {levels_summary(table)}")
+        print("valid: no errors")
+        return 0
     dataset = load_dataset(args.dir)
     if args.json:
         print(json.dumps(dataset_summary(dataset), indent=1))

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from idtool._data._levels import is_levels_dataset
 from idtool._data._paths import DATASET_FILE, dataset_json_path, path_problem, read_trace_file
 from idtool._data._plausibility import force_warnings, metadata_warnings, time_warnings
 from idtool._data._schema import DATASET_SCHEMA, schema_problems, trace_columns
@@ -354,6 +355,11 @@ def load_dataset(path: str | Path) -> Dataset:
         json_bytes = json_file.read_bytes()
     except OSError as err:
         raise IdtoolError(f"cannot read {json_file} ({err.strerror or err})") from None
+    if is_levels_dataset(json_file):
+        raise IdtoolError(
+            f"{root} is a friction table (kind: levels), not traces: load it with "
+            "idtool.load_levels and fit it with idtool.fit_levels (or `idtool fit`)"
+        )
     return _assemble(
         json_bytes, lambda rel, where: read_trace_file(root, rel, where), root, str(root)
     )
