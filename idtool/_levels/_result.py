@@ -263,32 +263,38 @@ class LevelsFit:
         t = self.table
         v = t.sliding_speed_m_s
         speeds = np.geomspace(0.5 * v.min(), 1.5 * v.max(), 60)
-        groups = sorted(
-            {(float(n), float(a)) for n, a in zip(t.normal_load_n, t.amplitude_m, strict=True)}
-        )
-        fig, ax = plt.subplots(figsize=(7.0, 4.5), dpi=120)
+        amplitudes = np.unique(t.amplitude_m)[:4]  # one panel each (the first four)
+        loads = np.unique(t.normal_load_n)
+        fig, axes = plt.subplots(
+            1, amplitudes.size, figsize=(3.2 + 3.0 * amplitudes.size, 4.2), dpi=120,
+            sharey=True, squeeze=False,
+        )  # fmt: skip
         colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-        for k, (n, a) in enumerate(groups):
-            c = colours[k % len(colours)]
-            p = self.predict(n, speeds, amplitude_m=a)
-            label = f"{n:g} N, {a * 1e6:.3g} um"
-            ax.plot(speeds * 1e3, p.fr, color=c, label=label)
-            ax.fill_between(speeds * 1e3, *p.mean_band, color=c, alpha=0.25, lw=0)
-            ax.fill_between(speeds * 1e3, *p.next_band, color=c, alpha=0.10, lw=0)
-            rows = (t.normal_load_n == n) & (t.amplitude_m == a)
-            se = np.nan_to_num(t.friction_ratio * np.hypot(t.on_se / t.on, t.off_se / t.off))
-            ax.errorbar(
-                v[rows] * 1e3, t.friction_ratio[rows], yerr=1.96 * se[rows], fmt="o", color=c, ms=4
-            )
-        ax.set_xscale("log")
-        ax.set_xlabel("sliding speed [mm/s]")
-        ax.set_ylabel("friction ratio ON / OFF [-]")
-        ax.set_ylim(0.0, 1.1)
-        ax.set_title(
+        se = np.nan_to_num(t.friction_ratio * np.hypot(t.on_se / t.on, t.off_se / t.off))
+        for ax, a in zip(axes[0], amplitudes, strict=True):
+            for k, n in enumerate(loads):
+                rows = (t.normal_load_n == n) & (t.amplitude_m == a)
+                if not rows.any():
+                    continue
+                c = colours[k % len(colours)]
+                p = self.predict(n, speeds, amplitude_m=a)
+                ax.plot(speeds * 1e3, p.fr, color=c, label=f"{n:g} N")
+                ax.fill_between(speeds * 1e3, *p.mean_band, color=c, alpha=0.25, lw=0)
+                ax.fill_between(speeds * 1e3, *p.next_band, color=c, alpha=0.10, lw=0)
+                ax.errorbar(
+                    v[rows] * 1e3, t.friction_ratio[rows], yerr=1.96 * se[rows], fmt="o",
+                    color=c, ms=4,
+                )  # fmt: skip
+            ax.set_xscale("log")
+            ax.set_xlabel("sliding speed [mm/s]")
+            ax.set_title(f"amplitude {a * 1e6:.3g} um", fontsize=10)
+            ax.grid(True, which="both", alpha=0.3)
+            ax.legend(fontsize=8, title="normal load", title_fontsize=8)
+        axes[0][0].set_ylabel("friction ratio ON / OFF [-]")
+        axes[0][0].set_ylim(0.0, 1.1)
+        fig.suptitle(
             f"{t.name}: model ({self.model.law}, {self.model.coupling}), 95% bands", fontsize=10
         )
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8, title="load, amplitude", title_fontsize=8)
         fig.text(
             0.01, 0.01, "dark band: FR at a new condition; light: next measurement", fontsize=7
         )
