@@ -211,6 +211,10 @@ def test_published_summary_fits_says_two_points_cannot_pin_the_coupling_and_pred
     assert p.pinned.all() and np.all(np.diff(p.fr) >= 0)  # less reduction as speed rises
     assert np.all(p.mean_band[0] <= p.fr) and np.all(p.fr <= p.mean_band[1])
     assert p.fr[1] == pytest.approx(0.38, abs=0.03)
+    # another load or amplitude moves along what the table does not inform: no band
+    elsewhere = fit.predict([10.0, 40.0], 0.0203, amplitude_m=[5e-6, 10e-6])
+    width = np.log(elsewhere.mean_band[1] / elsewhere.mean_band[0])
+    assert elsewhere.pinned[0] and not (elsewhere.pinned[1] and width[1] < 2 * width[0])
     # the model's speed trend is steeper than the table's: said so, carried in the bands
     assert "misses" in text and p.mean_band[0][3] < 0.71 < p.mean_band[1][3]
     out = fit.save(tmp_path / "fit")

@@ -92,9 +92,9 @@ def _run_levels(args: argparse.Namespace, started: float) -> int:
         direction=args.direction,
         seed=args.seed,
     )
-    fit.save(args.out, force=args.force)
+    fit.save(args.out, force=args.force, command=args.argv)
     if args.json:
-        print(json.dumps(fit.to_json(), indent=1))
+        print(json.dumps(fit.to_json(args.argv), indent=1))
         return 0
     print(fit.report())
     figure = ", fr_vs_speed.png" if fit.spans_speeds else ""

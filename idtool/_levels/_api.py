@@ -62,16 +62,17 @@ def fit_levels(
     coupling = DEFAULT_COUPLING if coupling == "by-design" else coupling
     model = levels_model(table, law, coupling, direction)
     opt = estimate(model, seed=seed)
-    estimates, sides = {}, {}
+    estimates, sides, ends = {}, {}, {}
     se_z = np.sqrt(np.maximum(np.diag(opt.cov_theta), 0.0))
     for j, p in enumerate(model.params):
-        lo, hi = profile_sides(model, opt, j)
+        lo, hi, ends[p.name] = profile_sides(model, opt, j)
         sides[p.name] = (lo, hi)
         se = float(se_z[j]) if lo.method == hi.method == "wald" else math.inf
         estimates[p.name] = estimate_from_sides(p, float(opt.theta[j]), se, lo, hi)
-    fit = LevelsFit(model, opt, estimates, sides, (), (), 0.0)
+    fit = LevelsFit(model, opt, estimates, sides, ends, (), (), 0.0)
     warnings, notes = _diagnose(fit)
-    return LevelsFit(model, opt, estimates, sides, warnings, notes, time.perf_counter() - start)
+    seconds = time.perf_counter() - start
+    return LevelsFit(model, opt, estimates, sides, ends, warnings, notes, seconds, seed)
 
 
 def _diagnose(fit: LevelsFit) -> tuple[tuple[str, ...], tuple[str, ...]]:
@@ -79,30 +80,31 @@ def _diagnose(fit: LevelsFit) -> tuple[tuple[str, ...], tuple[str, ...]]:
     t, o = model.table, fit.optimum
     warnings, notes = [], []
     names = model.names
-    if o.null.shape[1]:
-        loose = [names[j] for j in range(len(names)) if np.max(np.abs(o.null[j])) > _NULL_LOADING]
+    in_null = {
+        names[j]
+        for j in range(len(names))
+        if o.null.shape[1] and np.max(np.abs(o.null[j])) > _NULL_LOADING
+    }
+    loose = [
+        n for n, e in fit.estimates.items() if n in in_null or e.one_sided or e.weakly_identified
+    ]
+    if loose:
         points = {(n, a) for n, a in zip(t.normal_load_n, t.amplitude_m, strict=True)}
         speeds = np.unique(t.sliding_speed_m_s).size
         n_coupling = len(model.params) - names.index("mu") - 1
+        listed = "; ".join(f"{n} {fit.estimates[n].statement}" for n in loose)
         text = (
-            f"the table cannot pin {', '.join(loose)} apart: {t.operating_points[1].size} "
+            f"the table cannot pin {', '.join(loose)}: {t.operating_points[1].size} "
             f"condition(s), {len(points)} load-amplitude point(s) at {speeds} speed(s), "
-            f"for {len(names)} parameters; only a combination of them is informed, the "
-            "intervals of each say how far the table bounds it"
+            f"for {len(names)} parameters ({listed})"
         )
-        if len(points) <= n_coupling:
+        if len(points) <= n_coupling and any(names.index(n) > names.index("mu") for n in loose):
             text += (
                 f"; {len(points)} load-amplitude point(s) cannot pin a {n_coupling}-"
                 f"parameter coupling law ({model.coupling}): add loads or amplitudes, or "
                 "fit --coupling constant"
             )
         warnings.append(text)
-    open_sides = [n for n, e in fit.estimates.items() if e.one_sided]
-    if open_sides:
-        warnings.append(
-            "not bounded by the table on both sides: "
-            + "; ".join(f"{n} {fit.estimates[n].statement}" for n in open_sides)
-        )
     disc = o.sds["discrepancy_fr"]
     if disc > MISSPECIFIED_SD:
         warnings.append(

@@ -284,15 +284,19 @@ def estimate(model: LevelsModel, seed: int = 0) -> Optimum:
     )
 
 
-def profile_sides(model: LevelsModel, opt: Optimum, j: int) -> tuple[Side, Side]:
-    """Parameter ``j``'s interval sides (module docstring), internal scale."""
+def profile_sides(model: LevelsModel, opt: Optimum, j: int) -> tuple[Side, Side, np.ndarray]:
+    """Parameter ``j``'s interval sides (module docstring), internal scale, and theta
+    refitted at each end (2, k) (at the range's edge for an open side): what
+    predictions read where the table does not pin the parameter."""
     z = float(opt.theta[j])
     var = float(opt.cov_theta[j, j])
     uninformed = opt.null.shape[1] > 0 and np.max(np.abs(opt.null[j])) > 0.1
     se = math.sqrt(var) if var > 0 and not uninformed else math.inf
 
+    refits: dict[float, np.ndarray] = {}
+
     def rise(at: float) -> float:
-        _, chi2 = _solve(model, opt.y, opt.cov, opt.theta, {j: at})
+        refits[at], chi2 = _solve(model, opt.y, opt.cov, opt.theta, {j: at})
         return max(chi2 - opt.chi2, 0.0)
 
     sides = []
@@ -308,7 +312,20 @@ def profile_sides(model: LevelsModel, opt: Optimum, j: int) -> tuple[Side, Side]
             sides.append(Side(end, r, "wald"))
             continue
         sides.append(_walk(rise, z, sign, end, r))
-    return sides[0], sides[1]
+    ends = np.empty((2, opt.theta.size))
+    for k, side in enumerate(sides):
+        at = float(np.clip(side.z, -Z_AT_BOUND, Z_AT_BOUND))
+        if sign_of(k) * (at - z) <= 0:
+            ends[k] = opt.theta
+            continue
+        if at not in refits:
+            rise(at)
+        ends[k] = refits[at]
+    return sides[0], sides[1], ends
+
+
+def sign_of(k: int) -> float:
+    return -1.0 if k == 0 else 1.0
 
 
 def _walk(rise, z: float, sign: float, end: float, r_end: float) -> Side:

@@ -35,7 +35,8 @@ class LevelsPrediction:
         load_n, amplitude_m, speed_m_s, frequency_hz: the points (arrays of one shape).
         fr: the model's FR at the estimate [-].
         mean_band: ``(lo, hi)`` of FR at a new condition: the parameters' uncertainty
-            and the model discrepancy [-].
+            (and FR at the interval ends of those the table leaves open) and the model
+            discrepancy [-].
         next_band: ``(lo, hi)`` of the next measurement: plus the pull-to-pull scatter.
         pinned: False where the table does not bound the prediction (it moves along a
             direction of the parameters the data do not inform); its bands are NaN.
@@ -79,18 +80,22 @@ class LevelsFit:
         optimum: estimate, covariance, sds, uninformed directions.
         estimates: each physical parameter's :class:`~idtool.Estimate` by name.
         sides: each parameter's interval ends and how they were found.
+        ends: each parameter's theta refitted at its interval's ends (2, k), internal.
         warnings: what the reader must know (unpinned parameters, misfit).
         notes: facts of the design (no repeats: scatter and discrepancy summed).
         seconds: wall time of the fit [s].
+        seed: of the multi-start.
     """
 
     model: LevelsModel
     optimum: Optimum
     estimates: dict[str, Estimate]
     sides: dict[str, tuple[Side, Side]]
+    ends: dict[str, np.ndarray]
     warnings: tuple[str, ...]
     notes: tuple[str, ...]
     seconds: float
+    seed: int = 0
 
     @property
     def table(self):
@@ -115,7 +120,10 @@ class LevelsFit:
         the table's reference amplitude), broadcast together; ``frequency_hz`` [Hz]
         defaults to the table's (the first row's). Bands from the parameters'
         covariance (delta method on log FR) and the discrepancy sd; the next
-        measurement's adds the scatter sd."""
+        measurement's adds the scatter sd; both reach FR at the interval ends of each
+        parameter the table does not bound on both sides (the others refitted there).
+        A point is not pinned (NaN bands) where FR moves by more than 1% per unit of
+        the internal scale along a direction the table does not inform."""
         t = self.table
         if (amplitude_m is None) == (amplitude_fraction is None):
             raise ValueError("give amplitude_m or amplitude_fraction")
@@ -139,9 +147,20 @@ class LevelsFit:
         null = self.optimum.null
         moved = np.max(np.abs(jl @ null), axis=1) if null.shape[1] else np.zeros(fr.size)
         pinned = (moved <= UNPINNED_FR).reshape(fr.shape)
+        # the bands reach FR at the interval ends of each parameter the table does not
+        # bound on both sides (the others refitted there): the covariance alone misses
+        # a direction the data leave open that is flat at the estimate (a load scale
+        # far above every load of the table)
+        low, high = fr.copy(), fr.copy()
+        for name, e in self.estimates.items():
+            if e.one_sided or e.weakly_identified:
+                for theta_end in self.ends[name]:
+                    at_end = np.asarray(self.model.fr_at(theta_end, n, alpha, v, f))
+                    low, high = np.minimum(low, at_end), np.maximum(high, at_end)
 
         def band(sd):
-            lo, hi = fr * np.exp(-1.96 * sd), fr * np.exp(1.96 * sd)
+            lo = np.minimum(fr * np.exp(-1.96 * sd), low)
+            hi = np.maximum(fr * np.exp(1.96 * sd), high)
             return np.where(pinned, lo, np.nan), np.where(pinned, hi, np.nan)
 
         return LevelsPrediction(n, a, v, f, fr, band(mean_sd), band(next_sd), pinned)
@@ -190,8 +209,8 @@ class LevelsFit:
 
     fit_report = report
 
-    def to_json(self) -> dict[str, Any]:
-        """``fit.json``'s document."""
+    def to_json(self, command: list[str] | None = None) -> dict[str, Any]:
+        """``fit.json``'s document; ``command``: the command line that made it."""
         t, m, o = self.table, self.model, self.optimum
         estimates = {}
         for name, e in self.estimates.items():
@@ -234,18 +253,23 @@ class LevelsFit:
             "warnings": list(self.warnings),
             "notes": list(self.notes),
             "seconds": self.seconds,
+            "seed": self.seed,
+            "command": command,
         }
 
     @property
     def spans_speeds(self) -> bool:
         return np.unique(self.table.sliding_speed_m_s).size > 1
 
-    def save(self, out: str | Path, *, force: bool = False) -> Path:
+    def save(
+        self, out: str | Path, *, force: bool = False, command: list[str] | None = None
+    ) -> Path:
         """Write ``fit.json``, ``report.txt`` and, when the table spans speeds,
-        ``fr_vs_speed.png`` into the folder ``out``, all or nothing."""
+        ``fr_vs_speed.png`` into the folder ``out``, all or nothing; ``command`` (the
+        command line's arguments) is recorded in ``fit.json``."""
         out = Path(out)
         with atomic_output_dir(out, force=force) as tmp:
-            (tmp / FIT_JSON).write_text(json.dumps(self.to_json(), indent=1) + "\n")
+            (tmp / FIT_JSON).write_text(json.dumps(self.to_json(command), indent=1) + "\n")
             (tmp / REPORT_TXT).write_text(self.report() + "\n")
             if self.spans_speeds:
                 self.plot_speed(tmp / FIGURE)
