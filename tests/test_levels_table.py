@@ -217,6 +217,10 @@ def test_published_summary_fits_says_two_points_cannot_pin_the_coupling_and_pred
     assert elsewhere.pinned[0] and not (elsewhere.pinned[1] and width[1] < 2 * width[0])
     # the model's speed trend is steeper than the table's: said so, carried in the bands
     assert "misses" in text and p.mean_band[0][3] < 0.71 < p.mean_band[1][3]
+    # in-plane vibration across the sliding gives the gentler speed trend the table has
+    across = idtool.fit_levels(ds, direction="transverse")
+    assert across.optimum.sds["discrepancy_fr"] < 0.5 * fit.optimum.sds["discrepancy_fr"]
+    assert np.all(np.abs(across.fitted_fr - [0.38, 0.71]) < 0.1)
     out = fit.save(tmp_path / "fit")
     assert {f.name for f in out.iterdir()} == {"fit.json", "report.txt", "fr_vs_speed.png"}
     doc = json.loads((out / "fit.json").read_text())
