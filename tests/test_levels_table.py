@@ -109,6 +109,21 @@ def test_import_round_trip_in_si_and_refuses_to_overwrite(tmp_path):
         idtool.import_levels(table, out, material="steel")
     idtool.import_levels(table, out, material="other", force=True)
     assert idtool.load_levels(out).material == "other"
+    percent = _write(
+        tmp_path / "p.csv",
+        [
+            "load (N),amplitude (%),speed (m/s),off (N),on (N)",
+            "10,50,0.02,3,1",
+            "10,100,0.02,3,0.5",
+        ],
+    )
+    got = idtool.import_levels(
+        percent, tmp_path / "p", material="m", max_amplitude_m=10e-6, frequency_hz=20e3
+    )
+    np.testing.assert_allclose(got.amplitude_m, [5e-6, 10e-6])
+    np.testing.assert_array_equal(got.amplitude_fraction, [0.5, 1.0])
+    np.testing.assert_array_equal(got.vibration_frequency_hz, [20e3, 20e3])
+    assert got.reference_amplitude_m == 10e-6 and got.alpha.tolist() == [0.5, 1.0]
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no debris
 
 

@@ -123,7 +123,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "fit",
         help="fit Kt, mu and the coupling to a dataset",
         description="Joint least-squares fit of the bench model to every trace of a v1 "
-        "dataset (multi-start Levenberg-Marquardt, AR(1) noise, Gauss-Newton intervals).",
+        "dataset (multi-start Levenberg-Marquardt, AR(1) noise, Gauss-Newton intervals). "
+        "On a friction table (a dataset of kind 'levels', from import-levels): Kt, mu and "
+        "the coupling through its friction ratios, with --law, --coupling, --direction "
+        "and --seed (docs/how-to/levels-table.md).",
     )
     p.add_argument("dataset", help="dataset folder (or its dataset.json)")
     p.add_argument("--out", required=True, help="output folder, e.g. fits/NAME")
