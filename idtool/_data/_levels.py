@@ -79,6 +79,18 @@ class LevelsTable:
     path: Path | None = None
     sha256: str = ""
 
+    def __post_init__(self):
+        n = np.size(self.off)
+        for name in (*_NUMBERS, *_OPTIONAL):
+            value = np.asarray(getattr(self, name), float)
+            if value.shape != (n,):
+                raise IdtoolError(f"{name} has shape {value.shape}; off has ({n},)")
+            object.__setattr__(self, name, value)
+        if len(self.repeat) != n:
+            raise IdtoolError(f"repeat has {len(self.repeat)} entries; off has {n}")
+        if self.friction not in ("force", "coefficient"):
+            raise IdtoolError(f"friction {self.friction!r}: say 'force' or 'coefficient'")
+
     @property
     def n_rows(self) -> int:
         return int(self.off.size)
