@@ -239,6 +239,9 @@ def test_published_summary_fits_says_two_points_cannot_pin_the_coupling_and_pred
     out = fit.save(tmp_path / "fit")
     assert {f.name for f in out.iterdir()} == {"fit.json", "report.txt", "fr_vs_speed.png"}
     doc = json.loads((out / "fit.json").read_text())
+    from idtool._data._schema import LEVELS_FIT_SCHEMA, schema_validator
+
+    schema_validator(LEVELS_FIT_SCHEMA).validate(doc)
     assert doc["kind"] == "levels" and doc["model"]["coupling"] == "power-limited"
     assert doc["estimates"]["mu"]["statement"].startswith("[")
 

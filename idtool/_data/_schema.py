@@ -24,6 +24,7 @@ from idtool._errors import Problem
 __all__ = [
     "DATASET_SCHEMA",
     "FIT_SCHEMA",
+    "LEVELS_FIT_SCHEMA",
     "LEVELS_SCHEMA",
     "SAMPLE_SCHEMA",
     "SIMULATOR_PARAMS_SCHEMA",
@@ -44,6 +45,7 @@ FIT_SCHEMA = "fit.schema.json"  # fit.json (idtool._fit._folder.FIT_JSON)
 SAMPLE_SCHEMA = "sample.schema.json"  # sample.json (idtool._fit._folder.SAMPLE_JSON)
 VALIDATION_SCHEMA = "validation.schema.json"  # validation.json (_folder.VALIDATION_JSON)
 LEVELS_SCHEMA = "levels_table.schema.json"  # dataset.json of kind "levels" (._levels)
+LEVELS_FIT_SCHEMA = "levels_fit.schema.json"  # fit.json of a levels fit (idtool._levels)
 _ALL = (
     DATASET_SCHEMA,
     TRACE_TABLE_SCHEMA,
@@ -52,6 +54,7 @@ _ALL = (
     SAMPLE_SCHEMA,
     VALIDATION_SCHEMA,
     LEVELS_SCHEMA,
+    LEVELS_FIT_SCHEMA,
 )
 
 
