@@ -19,6 +19,7 @@ from idtool._cli._main import main
 from idtool._data._example import example_dataset_path
 from idtool._data._schema import schema_validator
 from idtool._fit._folder import SAMPLE_JSON
+from idtool._posterior._box import BoxTarget
 from idtool._posterior._chainfile import read_chain, read_settings
 from idtool._posterior._diagnostics import RULE, diagnose
 from idtool._posterior._funnel import FunnelTarget
@@ -167,13 +168,16 @@ def test_a_default_sample_of_a_default_fit_converges(sampled, readme_run):
     assert code == 0
     d = json.loads((folder / "sample.json").read_text())["diagnostics"]
     assert d["converged"] and d["stopped_by"] == "converged" and d["steps"] == straight.steps
-    # chain.h5 holds the walkers' coordinates, with the discrepancy's funnel opened
-    # (idtool._posterior._funnel; its transform recorded, rebuilt on resume); Posterior.chain
-    # the internal scale
+    # chain.h5 holds the walkers' coordinates: the physical parameters on their box
+    # (idtool._posterior._box), the discrepancy's funnel opened over it
+    # (idtool._posterior._funnel; both transforms recorded, rebuilt on resume);
+    # Posterior.chain the internal scale
     settings = read_settings(folder / "chain.h5")[0]
     assert "ridge" not in settings and settings["funnel"]["delta0"] > 0.0
-    funnel = FunnelTarget.from_doc(SimpleNamespace(params=post.params), settings["funnel"])
-    internal = funnel.to_internal(jnp.asarray(read_chain(folder / "chain.h5")[0]))
+    assert settings["box"]["slopes"] == [1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0]
+    box = BoxTarget.from_doc(SimpleNamespace(params=post.params), settings["box"])
+    funnel = FunnelTarget.from_doc(box, settings["funnel"])
+    internal = box.to_internal(funnel.to_internal(jnp.asarray(read_chain(folder / "chain.h5")[0])))
     np.testing.assert_array_equal(np.asarray(internal), post.chain)
 
 

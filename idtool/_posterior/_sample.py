@@ -13,9 +13,12 @@
   errors), brought inside the parameters' ranges
   (:func:`idtool._posterior._start.start_within`); the log-posterior must be finite at
   the optimum and at every start. Where the fit's interval of a physical parameter
-  spans over half a decade (Kt read through a coupling law the bench may not follow),
-  the levels posterior is profiled along it, the walkers start on that profile and
-  sample coordinates sheared along it (:mod:`idtool._posterior._ridge`).
+  spans over 0.2 decades (Kt read through a coupling law the bench may not follow, or
+  through pull-to-pull scatter), the levels posterior is profiled along it, the walkers
+  start on that profile and sample coordinates sheared along it
+  (:mod:`idtool._posterior._ridge`), over every bounded parameter's place in its range
+  (:mod:`idtool._posterior._box`); elsewhere the physical parameters are on that box and
+  the discrepancy's funnel is opened over it (:mod:`idtool._posterior._funnel`).
 * Seeded: walker starts from ``numpy.random.default_rng(seed)``, emcee's moves from
   ``RandomState(seed)``; the same seed gives the same chain, bit for bit.
 * Checkpointed (``chain_path``): every ``checkpoint_s`` seconds (and at the end) the
@@ -45,6 +48,7 @@ from idtool._fit._folder import CHAIN_H5
 from idtool._fit._variability import SD_PARAMS
 from idtool._model._benchmodel import BenchModel
 from idtool._model._noise import NOISE_MODELS
+from idtool._posterior._box import BoxTarget, base_internal, ridge_in_box
 from idtool._posterior._chainfile import last_state, read_linearisation, read_settings
 from idtool._posterior._funnel import FunnelTarget, open_funnel
 from idtool._posterior._levels import (
@@ -313,12 +317,25 @@ def sample_posterior(
             capped = start_within(theta, cov, params)[1]
             ridge = ridge_profile(fn, levels_target, theta, weak)
             one_sided = {params[weak].name: open_sides(ridge)}
-            sheared = RidgeTarget.along(levels_target, ridge)
+            # sheared over the box of every bounded parameter (_box.BoxTarget)
+            box = BoxTarget.of(levels_target)
+            sheared = RidgeTarget.along(box, ridge_in_box(ridge, box))
             fn = LogPosterior(sheared, _batch(walkers, noise))
             theta, cov = ridge_walkers(ridge, capped, walkers, rng)
-            theta = np.asarray(sheared.from_internal(jnp.asarray(theta)))
-        else:  # the discrepancy's funnel opened (_funnel.FunnelTarget), if it has one
-            funnel = open_funnel(levels_target, fn, theta, k)
+            cov = box.cov_from_internal(np.mean(theta, axis=0), cov)
+            theta = np.asarray(sheared.from_internal(box.from_internal(jnp.asarray(theta))))
+        else:
+            # the physical parameters on their box (_box.BoxTarget), then the
+            # discrepancy's funnel opened over it (_funnel.FunnelTarget), if it has one:
+            # the funnel reads the discrepancy sd on its internal scale, left unboxed
+            box = BoxTarget.of(levels_target, tuple(range(k)))
+            fn = LogPosterior(box, _batch(walkers, noise))
+            theta, cov = (
+                np.asarray(box.from_internal(jnp.asarray(theta))),
+                box.cov_from_internal(theta, cov),
+            )
+            sheared = box
+            funnel = open_funnel(box, fn, theta, k)
             if funnel is not None:
                 sheared = funnel
                 theta, cov = funnel.sheared_start(theta, cov)
@@ -341,10 +358,18 @@ def sample_posterior(
         if noise == LEVELS:
             levels_target = build_levels_target(fit.model, fit.levels[0], table)
             assert stored is not None
+            # the box under the ridge or the funnel (a chain sampled before it: none)
+            base = (
+                BoxTarget.from_doc(levels_target, stored["box"])
+                if stored.get("box")
+                else levels_target
+            )
             if stored.get("ridge"):  # sampled along a ridge (_ridge.RidgeTarget)
-                sheared = RidgeTarget.from_doc(levels_target, stored["ridge"])
+                sheared = RidgeTarget.from_doc(base, stored["ridge"])
             elif stored.get("funnel"):  # the funnel opened (_funnel.FunnelTarget)
-                sheared = FunnelTarget.from_doc(levels_target, stored["funnel"])
+                sheared = FunnelTarget.from_doc(base, stored["funnel"])
+            elif isinstance(base, BoxTarget):
+                sheared = base
             fn = LogPosterior(
                 sheared if sheared is not None else levels_target, _batch(walkers, noise)
             )
@@ -355,7 +380,9 @@ def sample_posterior(
     settings = _settings(fit, params, table, noise, walkers, seed)
     settings |= {"warnings": list(warnings), "one_sided": one_sided}
     if sheared is not None:  # the chain holds transformed vectors: how to map them back
-        settings["ridge" if isinstance(sheared, RidgeTarget) else "funnel"] = sheared.to_doc()
+        for part in (sheared, getattr(sheared, "base", None)):
+            if isinstance(part, AbstractReparameterised):
+                settings[part.to_doc()["kind"]] = part.to_doc()
     store = ChainStore(chain_file, settings, np.asarray(z_lin))
     bar = _progress(progress, steps if steps is not None else max(done, FIRST_CHECK), done)
     start_done = done
@@ -383,7 +410,7 @@ def sample_posterior(
         bar.close()
     chain, lp, acc = store.read()
     if sheared is not None:  # the sampled coordinates back to the internal scale
-        chain = np.asarray(sheared.to_internal(jnp.asarray(chain)))
+        chain = np.asarray(base_internal(sheared, jnp.asarray(chain)))
     values = np.stack(
         [np.asarray(p.value(jnp.asarray(chain[:, :, i]))) for i, p in enumerate(params)], axis=-1
     )
