@@ -226,6 +226,14 @@ def test_chain_h5_says_how_its_internal_scale_maps_to_physical_units(levels):
         )
         for j, c in zip(funnel["scaled"], funnel["centre"], strict=True):
             chain[..., j] = c + f * (chain[..., j] - c)
+    # then each boxed parameter's place in its range back to the internal scale (the
+    # box's record, applied after the funnel's or the ridge's map, as it says)
+    box = settings.get("box")
+    if box is not None:
+        assert "after" in box["formula"]
+        for j, k in enumerate(box["slopes"]):
+            if k > 0.0:
+                chain[..., j] = np.log(chain[..., j] / (1.0 - chain[..., j])) / k
     for i, t in enumerate(settings["transforms"]):
         z = chain[:, :, i].T  # (walkers, steps) as posterior.nc
         physical = formulas[t["value"]](z, t)

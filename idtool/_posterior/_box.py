@@ -122,7 +122,10 @@ class BoxTarget(AbstractReparameterised):
         return {
             "kind": "box",
             "slopes": list(self.slopes),
-            "formula": "z[i] = ln(x[i] / (1 - x[i])) / slopes[i] where slopes[i] > 0, else x[i]",
+            "formula": (
+                "z[i] = ln(x[i] / (1 - x[i])) / slopes[i] where slopes[i] > 0, else x[i];"
+                " applied after the ridge's or the funnel's map, where the chain has one"
+            ),
         }
 
     @classmethod
