@@ -11,7 +11,7 @@ curve whose slope changes eightfold along the walkers' range on the "scatter" be
 (seed 101: the gain's internal value from 0.75 to 3.6, near the top of its range, where
 ``d ln v / dz`` shrinks as ``sigmoid(z) (1 - sigmoid(z))``). Differential evolution's
 proposals are straight lines between walkers, and they stall on such a bend (emcee's
-integrated time of the gain 1,170-1,310 steps in 40,000-step chains).
+integrated times of the gain and the load scale 1,020-1,310 steps in 40,000-step chains).
 
 So the walkers hold, for each boxed parameter, its place in its range,
 
@@ -23,9 +23,11 @@ density on ``u`` is the target's at ``z(u) = logit(u) / k`` times
 ``|dz/du| = 1 / (k u (1 - u))``; outside ``0 < u < 1`` it is zero (the range's walls,
 where a proposal is rejected). A log-uniform prior is flat in ``u``.
 
-Measured (16 walkers x 40,000 steps, sampler seeds 1 and 2, the slowest parameter's
-integrated time on the internal scale): "scatter" 101, 691 and 633 (Kt) against 1,311
-and 1,172 (the gain) on the internal coordinates. The box is the base under the ridge's
+Measured (16 walkers x 40,000 steps, sampler seeds 1 and 2, emcee's integrated time on
+the internal scale) on "scatter" 101, every bounded parameter boxed, no funnel: the gain
+368 and 436, the load scale 425 and 450, against 1,311 and 1,172, 1,198 and 1,018 on the
+internal coordinates; the slowest parameter 691 and 633 (Kt, whose plateaus the ridge
+then crosses: 61 along it) against 1,311 and 1,172. The box is the base under the ridge's
 shear (:mod:`idtool._posterior._ridge`) and the funnel's scaling
 (:mod:`idtool._posterior._funnel`): :mod:`idtool._posterior._sample` says which
 parameters it boxes where.
