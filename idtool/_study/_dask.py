@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import uuid
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
@@ -78,13 +79,19 @@ def run_tasks(
     record as it finishes (an error's record when a task raises). ``stop_after``: stop
     (cancelling the rest) once that many have finished, as an interruption would.
     Returns the number of records handed on."""
-    from distributed import as_completed
+    from distributed import CancelledError, as_completed
     from tqdm.auto import tqdm
 
     if not tasks:
         return 0
+    # Keys unique to this call: a resumed study resubmits the tasks an interrupted call
+    # cancelled, and a key reused while the scheduler still forgets the cancelled one
+    # comes back cancelled ("cancelled for reason: unknown", seen in CI)
+    run = uuid.uuid4().hex[:8]
     futures = {
-        client.submit(func, t, key=f"idtool-study-{t['study_key']}-{t['task_id']}", pure=False): t
+        client.submit(
+            func, t, key=f"idtool-study-{t['study_key']}-{t['task_id']}-{run}", pure=False
+        ): t
         for t in tasks
     }
     done = 0
@@ -94,6 +101,8 @@ def run_tasks(
             task = futures[future]
             try:
                 record = future.result()
+            except CancelledError:  # not the fit's failure: left unrecorded, so resumed
+                continue
             except Exception as err:  # a failed fit is a record, not the study's end
                 record = {
                     "task_id": task["task_id"],
