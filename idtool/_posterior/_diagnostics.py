@@ -200,15 +200,20 @@ def _tau(x: np.ndarray, c: float = 5.0) -> np.ndarray:
     at all, tau is the chain length.
     """
     from emcee.autocorr import auto_window
+    from scipy.fft import irfft, next_fast_len, rfft
 
     steps, _, ndim = x.shape
     out = np.full(ndim, float(steps))
     if steps < 4:
         return out
-    n = 1 << (2 * steps - 1).bit_length()
+    # Any length >= 2 steps - 1 gives the linear (not circular) autocorrelation; the
+    # real transform at a fast length (not the next power of two, as emcee pads) costs a
+    # third: on a 40,000-step chain of 16 walkers x 7 parameters the three estimates of
+    # each check took 14% of a default run's sampling time
+    n = next_fast_len(2 * steps - 1, real=True)
     centred = x - x.mean(axis=0, keepdims=True)
-    f = np.fft.fft(centred, n=n, axis=0)
-    acf = np.fft.ifft(f * np.conjugate(f), axis=0)[:steps].real  # (steps, walkers, ndim)
+    f = rfft(centred, n=n, axis=0)
+    acf = irfft(f * np.conjugate(f), n=n, axis=0)[:steps]  # (steps, walkers, ndim)
     var = acf[0]
     for j in range(ndim):
         moving = var[:, j] > 0
