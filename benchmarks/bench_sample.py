@@ -38,8 +38,8 @@ fixed-length chains of ``sample_posterior`` (16 walkers x 40,000 steps, 2026-11-
 4-8), the slowest parameter's integrated time before -> after: "scatter" 101 1,311 and
 1,172 (the coupling gain, sampler seeds 1 and 2) -> 256 (the discrepancy sd; Kt 61 along
 its profile); "coupling" 501 852 -> 522; the example (16,000 steps) 76 -> 75 (Kt 54 ->
-31, the gain 57 -> 26). ESS per step is 16 / tau: 2-5x on the slow benches; a step costs
-the same.
+31, the gain 57 -> 26). ESS per step is 16 / tau: 1.6x (coupling 501) to 5x (scatter
+101); a step costs the same.
 
 Targets (issue 5): 32 x 3000 on the example in under 2 minutes on 2 cores; ESS/s at
 least 30x the non-vectorised SciPy run.
