@@ -52,6 +52,7 @@ CODES = {
     "drift_creep": "the fitted offset drifts grow with the load (a creeping level)",
     "drift_modelled": "a level model follows the levels' drift (relaxing ON or creeping level)",
     "coupling_laws": "the coupling laws fit comparably or disagree",
+    "directions": "the directions of vibration fit comparably",
     "detuning": "the sdof horn's detuning",
     "data": "what the data and their blocks say (mains, sample rate, traces)",
     "fit": "another of the fit's doubts",

@@ -102,6 +102,10 @@ def fit(
             model), "transverse" (in the contact plane, across the sliding) or "normal"
             (out of plane: the indentation oscillates). Every candidate model shares
             it; ``fit.json`` records it (``direction``). Not with the "sdof" coupling.
+            "auto": every direction, each with every coupling law fitted, compared by
+            BIC as the coupling laws are (``fit.json``'s ``directions``; predictions
+            average the directions kept by their BIC weights, ``model_weights``); it
+            costs a fit per direction, the transverse and normal ones slower.
     """
     if starts < 1:
         raise IdtoolError(f"starts = {starts}: give at least 1")

@@ -122,8 +122,9 @@ class FitArtefact:
         warnings: the fit's doubts (:class:`~idtool._diagnostic.Diagnostic`).
         notes: what the data let the fit measure (facts, not doubts).
         coupling_laws: each fitted coupling law's key, criteria and weights, best first.
-        alternates: the other coupling laws predictions average over: law -> (BIC
-            weight, its :class:`LawFit`).
+        alternates: the other models predictions average over: their label (a coupling
+            law's name, or with ``direction="auto"`` :func:`idtool._fit._run.model_label`'s)
+            -> (BIC weight, its :class:`LawFit`).
         summary: what it reports besides (traces, derived quantities, correlations,
             model comparison, levels model, provenance:
             :class:`~idtool._fit._summary.FitSummary`).
@@ -145,6 +146,10 @@ class FitArtefact:
     report_text: str = dataclasses.field(repr=False)
     doc: dict[str, Any] = dataclasses.field(repr=False)
     states: dict[str, dict[str, np.ndarray]] = dataclasses.field(repr=False, default_factory=dict)
+    # ``direction="auto"``: each direction's record and each model predictions average
+    # over by label (fit.json's ``directions`` and ``model_weights``); empty otherwise
+    directions: dict[str, dict[str, Any]] = dataclasses.field(repr=False, default_factory=dict)
+    model_weights: dict[str, dict[str, Any]] = dataclasses.field(repr=False, default_factory=dict)
 
     @property
     def schema_version(self) -> str:
@@ -160,9 +165,20 @@ class FitArtefact:
         return self.chosen.model
 
     @property
+    def chosen_label(self) -> str:
+        """The chosen model's name among those predictions average over: its coupling
+        law, or its entry of ``model_weights`` (``direction="auto"``)."""
+        for label, entry in self.model_weights.items():
+            if "state_file" not in entry and entry.get("key") == self.spec.key:
+                return label
+        return self.model.coupling.name
+
+    @property
     def chosen_weight(self) -> float:
-        """The chosen coupling law's BIC weight (1 when the fit lists no laws)."""
-        entry = self.coupling_laws.get(self.model.coupling.name)
+        """The chosen model's BIC weight among those predictions average over (its
+        coupling law's, or its ``model_weights`` entry's; 1 when the fit lists none)."""
+        table = self.model_weights or self.coupling_laws
+        entry = table.get(self.chosen_label)
         return 1.0 if entry is None else float(entry["bic_weight"])
 
 
@@ -347,12 +363,16 @@ def fit_artefact(
     law_entries = doc.get("coupling_laws", [])
     chosen_spec = _spec(doc, doc["coupling"])
     chosen = _law_fit(chosen_spec, data, states[FIT_STATE.name], FIT_STATE.name)
+    model_entries = doc.get("model_weights", [])
     alternates = {}
-    for w in law_entries:
+    # the models predictions average over: by direction and coupling law where the
+    # directions were compared, else by coupling law
+    labelled = [(w, w["model"]) for w in model_entries] or [(w, w["law"]) for w in law_entries]
+    for w, label in labelled:
         if "state_file" in w:
-            spec = _spec(doc, w["law"], w["key"])
+            spec = _spec(doc, w["key"].split("/")[1], w["key"])
             alt = _law_fit(spec, data, states[w["state_file"]], w["state_file"])
-            alternates[w["law"]] = (float(w["bic_weight"]), alt)
+            alternates[label] = (float(w["bic_weight"]), alt)
     return FitArtefact(
         dataset=dataset,
         data=data,
@@ -362,6 +382,8 @@ def fit_artefact(
         warnings=_sentences(doc, "warnings"),
         notes=_sentences(doc, "notes"),
         coupling_laws={w["law"]: w for w in law_entries},
+        directions={w["direction"]: w for w in doc.get("directions", [])},
+        model_weights={w["model"]: w for w in model_entries},
         alternates=alternates,
         summary=fit_summary(doc),
         report_text=report_text.rstrip("\n"),

@@ -26,7 +26,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -51,7 +51,7 @@ from idtool._fit._program import lm_arguments, lm_program
 from idtool._fit._result import FitResult
 from idtool._fit._with_levels import compile_variability, with_variability
 from idtool._model._actuator import ACTUATORS
-from idtool._model._benchmodel import bench_model, shared_params_of
+from idtool._model._benchmodel import BenchModel, bench_model, shared_params_of
 from idtool._model._coupling import COUPLINGS, reacts_on_vibration
 from idtool._model._directions import DIRECTIONS
 from idtool._model._laws import FRICTION_LAWS
@@ -69,11 +69,17 @@ from idtool._model._settings import ParameterSetting
 from idtool._model._spec import ModelSpec
 
 __all__ = [
+    "CHOICES",
+    "ChoiceWeight",
     "FitRun",
     "LawWeight",
     "check_settings",
+    "choice_table",
+    "choice_weights",
     "coupling_weights",
+    "direction_weights",
     "fit_dataset",
+    "model_label",
 ]
 
 
@@ -87,8 +93,9 @@ class FitRun:
     reason: str
     seed: int
     profiles: dict[str, Profile] = dataclasses.field(default_factory=dict)
-    # the other coupling laws' best fits whose BIC weight reaches MIN_LAW_WEIGHT, by law
-    # (with the levels model when the chosen fit has it): predictions average over them
+    # the other models' best fits whose BIC weight reaches MIN_LAW_WEIGHT, by
+    # :meth:`label` (a coupling law's name unless directions were compared; with the
+    # levels model when the chosen fit has it): predictions average over them
     alternates: dict[str, FitResult] = dataclasses.field(default_factory=dict)
 
     @property
@@ -96,9 +103,31 @@ class FitRun:
         return sorted(self.candidates.items(), key=lambda kv: kv[1].bic)
 
     @property
-    def coupling_weights(self) -> dict[str, LawWeight]:
+    def coupling_weights(self) -> dict[str, ChoiceWeight]:
         """Each fitted coupling law's criteria and weights (:func:`coupling_weights`)."""
         return coupling_weights(self.candidates)
+
+    @property
+    def direction_weights(self) -> dict[str, ChoiceWeight]:
+        """Each fitted direction of vibration's criteria and weights
+        (:func:`direction_weights`; one entry unless ``direction="auto"``)."""
+        return direction_weights(self.candidates)
+
+    @property
+    def compared(self) -> tuple[str, ...]:
+        """The model choices (of :data:`CHOICES`) whose candidates differ in this run."""
+        return compared_choices(self.candidates)
+
+    def label(self, model: BenchModel) -> str:
+        """The name predictions give ``model`` among the models they average over
+        (:func:`model_label`)."""
+        return model_label(model, self.compared)
+
+    @property
+    def model_weights(self) -> dict[str, ChoiceWeight]:
+        """Each model predictions may average over, by :meth:`label`: the best candidate
+        of each coupling law, or of each (coupling law, direction) pair fitted."""
+        return choice_weights(self.candidates, lambda f: self.label(f.model))
 
 
 # A coupling law below this BIC weight adds nothing a prediction can show (fewer than 2
@@ -106,10 +135,17 @@ class FitRun:
 MIN_LAW_WEIGHT = 1e-3
 
 
-def _key(law: str, coupling: str, actuator: str, offset: str, level: str) -> str:
+def _key(
+    law: str,
+    coupling: str,
+    actuator: str,
+    offset: str,
+    level: str,
+    direction: str = DEFAULT_DIRECTION,
+) -> str:
     """A candidate's name (:attr:`idtool._model._spec.ModelSpec.key`; the key does not
     name the noise model)."""
-    return ModelSpec(law, coupling, DEFAULT_NOISE, actuator, offset, level).key
+    return ModelSpec(law, coupling, DEFAULT_NOISE, actuator, offset, level, (), direction).key
 
 
 def _better(multi: FitResult, nested: FitResult) -> FitResult:
@@ -121,29 +157,68 @@ def _better(multi: FitResult, nested: FitResult) -> FitResult:
 
 
 @dataclasses.dataclass(frozen=True)
-class LawWeight:
-    """A coupling law's standing among those fitted: its best candidate (actuator and
-    offset models chosen for it), information criteria and Akaike/Schwarz weights
-    ``exp(-delta / 2) / sum(...)`` (``delta``: the criterion's excess over the best
-    law's); the BIC weight approximates the law's posterior probability under equal
-    prior odds (Kass & Raftery 1995), the AIC weight its expected predictive standing."""
+class ChoiceWeight:
+    """An option's standing in a model choice (a coupling law among those fitted, a
+    direction of vibration among the directions): its best candidate (the other parts
+    chosen for it), information criteria and Akaike/Schwarz weights ``exp(-delta / 2)
+    / sum(...)`` (``delta``: the criterion's excess over the best option's); the BIC
+    weight approximates the option's posterior probability under equal prior odds (Kass
+    & Raftery 1995), the AIC weight its expected predictive standing."""
 
-    law: str
+    name: str
     key: str
     bic: float
     aic: float
     bic_weight: float
     aic_weight: float
 
-    def to_dict(self) -> dict[str, float | str]:
-        return dataclasses.asdict(self)
+    @property
+    def law(self) -> str:
+        """The option's name (a coupling law's, as the field was called before)."""
+        return self.name
+
+    def to_dict(self, field: str = "law") -> dict[str, float | str]:
+        """The record ``fit.json`` keeps, the option's name under ``field``."""
+        out = dataclasses.asdict(self)
+        return {field: out.pop("name"), **out}
 
 
-def coupling_weights(candidates: dict[str, FitResult]) -> dict[str, LawWeight]:
-    """Per coupling law (best first): :class:`LawWeight` from each law's best candidate."""
+LawWeight = ChoiceWeight  # the coupling laws' table, as it was named
+
+# The model choices BIC compares, by name: what each candidate model chose. A run
+# compares those whose candidates differ (``coupling="auto"``, ``direction="auto"``).
+CHOICES: dict[str, Callable[[BenchModel], str]] = {
+    "coupling": lambda m: m.coupling.name,
+    "direction": lambda m: m.direction.name,
+}
+
+
+def compared_choices(candidates: Mapping[str, FitResult]) -> tuple[str, ...]:
+    """The names of :data:`CHOICES` on which ``candidates`` differ."""
+    return tuple(
+        name for name, of in CHOICES.items() if len({of(f.model) for f in candidates.values()}) > 1
+    )
+
+
+def model_label(model: BenchModel, compared: Sequence[str] = ()) -> str:
+    """``model``'s name among the models predictions average over: its coupling law
+    unless directions were compared (as before the directions); then its direction, or
+    ``coupling@direction`` when the coupling laws were compared too."""
+    if "direction" not in compared:
+        return model.coupling.name
+    if "coupling" not in compared:
+        return model.direction.name
+    return f"{model.coupling.name}@{model.direction.name}"
+
+
+def choice_weights(
+    candidates: Mapping[str, FitResult], of: Callable[[FitResult], str]
+) -> dict[str, ChoiceWeight]:
+    """Per option ``of`` a candidate (best first): :class:`ChoiceWeight` from each
+    option's best candidate. The one mechanism of every model choice BIC makes."""
     best: dict[str, tuple[str, FitResult]] = {}
     for key, fit in candidates.items():
-        law = fit.model.coupling.name
+        law = of(fit)
         if law not in best or fit.bic < best[law][1].bic:
             best[law] = (key, fit)
 
@@ -156,9 +231,64 @@ def coupling_weights(candidates: dict[str, FitResult]) -> dict[str, LawWeight]:
     aic = np.array([best[n][1].aic for n in laws])
     wb, wa = weights(bic), weights(aic)
     return {
-        n: LawWeight(n, best[n][0], float(bic[i]), float(aic[i]), float(wb[i]), float(wa[i]))
+        n: ChoiceWeight(n, best[n][0], float(bic[i]), float(aic[i]), float(wb[i]), float(wa[i]))
         for i, n in enumerate(laws)
     }
+
+
+def choice_table(candidates: Mapping[str, FitResult], choice: str) -> dict[str, ChoiceWeight]:
+    """Per option of the model choice ``choice`` (a name of :data:`CHOICES`), best
+    first, from each option's best candidate."""
+    option = CHOICES[choice]
+    return choice_weights(candidates, lambda f: option(f.model))
+
+
+def coupling_weights(candidates: Mapping[str, FitResult]) -> dict[str, ChoiceWeight]:
+    """Per coupling law (best first), from each law's best candidate."""
+    return choice_table(candidates, "coupling")
+
+
+def direction_weights(candidates: Mapping[str, FitResult]) -> dict[str, ChoiceWeight]:
+    """Per direction of vibration (best first), from each direction's best candidate."""
+    return choice_table(candidates, "direction")
+
+
+# What the warning of options that fit comparably says, per choice: the options' plural,
+# and what the chosen option's estimates and the averaged predictions mean then.
+_COMPARABLY = {
+    "coupling": (
+        "coupling_laws",
+        "the coupling laws",
+        "the estimates are the chosen law's; predictions average the laws by their BIC "
+        "weights, so where the laws disagree (between or beyond the measured operating "
+        "points) the bands include their spread",
+    ),
+    "direction": (
+        "directions",
+        "the directions of vibration",
+        "the estimates are the chosen direction's (Kt and the coupling's slip amplitude "
+        "mean different things in each); predictions average the directions by their BIC "
+        "weights, so where they disagree the bands include their spread. A vibrometer "
+        "reading of the horn tip's motion, or pulls at two speeds, would tell them apart",
+    ),
+}
+
+
+def comparable_warning(choice: str, weights: Mapping[str, ChoiceWeight], chosen: str):
+    """The :class:`Diagnostic` of a model choice whose options other than ``chosen``
+    hold more than 5% of the BIC weight (the data do not single one out), else None."""
+    rivals = [w for w in weights.values() if w.name != chosen and w.bic_weight > 0.05]
+    if not rivals:
+        return None
+    code, options, meaning = _COMPARABLY[choice]
+    first = weights[chosen]
+    return Diagnostic(
+        code,
+        f"{options} fit comparably (BIC weight {first.name} {first.bic_weight:.2f}, "
+        + ", ".join(f"{w.name} {w.bic_weight:.2f}" for w in rivals)
+        + f"): {meaning}",
+        bic_weights={w.name: w.bic_weight for w in (first, *rivals)},
+    )
 
 
 def fit_dataset(
@@ -200,9 +330,14 @@ def fit_dataset(
     ``settings``: fixed values, bounds, scales, starts and priors of shared parameters
     (:mod:`idtool._model._settings`), applied to every candidate model that has the
     parameter; a setting that names none of them is an error. ``direction``: of the
-    vibration (:data:`DIRECTIONS`), shared by every candidate; with another than along,
-    ``coupling="auto"`` leaves out the coupling laws in which the contact loads the horn
-    (``sdof``: :func:`idtool._model._coupling.reacts_on_vibration`)."""
+    vibration (:data:`DIRECTIONS`), shared by every candidate, or ``"auto"``: every
+    registered direction, each with every coupling law the run fits (the product: the
+    coupling law sets the slip amplitude, the direction the friction ratio it gives, so
+    each can stand in for the other), ranked by BIC as the coupling laws are
+    (:func:`choice_weights`). With another direction than along, ``coupling="auto"``
+    and ``direction="auto"`` leave out the coupling laws in which the contact loads the
+    horn (``sdof``: :func:`idtool._model._coupling.reacts_on_vibration`), and a
+    direction no coupling law is left for."""
     started = time.perf_counter()
 
     def say(what: str) -> None:
@@ -223,12 +358,20 @@ def fit_dataset(
         couplings = SPEED_RESOLVED_COUPLINGS if pairs else (DEFAULT_COUPLING,)
     else:
         couplings = COUPLINGS.names() if coupling == "auto" else (coupling,)
-    direction = DIRECTIONS.get(direction).name
-    if coupling == "auto" and direction != DEFAULT_DIRECTION:
-        couplings = tuple(c for c in couplings if not reacts_on_vibration(COUPLINGS.get(c)))
     single_load = np.unique(data.normal_load_n).size == 1
     if coupling == "auto" and single_load:
         couplings = ("constant",)
+    auto_direction = direction == "auto"
+    directions = DIRECTIONS.names() if auto_direction else (DIRECTIONS.get(direction).name,)
+
+    def couplings_in(dr: str) -> tuple[str, ...]:
+        """The coupling laws fitted in direction ``dr``: every one along the sliding or
+        when both were named; else those that do not load the horn."""
+        if dr == DEFAULT_DIRECTION or (coupling != "auto" and not auto_direction):
+            return couplings
+        return tuple(c for c in couplings if not reacts_on_vibration(COUPLINGS.get(c)))
+
+    directions = tuple(dr for dr in directions if couplings_in(dr))
     actuators = ACTUATORS.names() if actuator == "auto" else (ACTUATORS.get(actuator).name,)
     offsets = OFFSETS.names() if offset == "auto" else (OFFSETS.get(offset).name,)
     lv = "steady" if level == "auto" else LEVEL_MODELS.get(level).name
@@ -238,39 +381,52 @@ def fit_dataset(
         # the candidates' programs, compiled in the order the loop below needs them
         # while it fits the ones before (the first it compiles itself); the offset
         # models nest in the best actuator model, most often the simplest
-        plan = [(lw, cp, ac, offsets[0], lv) for lw in laws for cp in couplings for ac in actuators]
-        plan += [
-            (lw, cp, actuators[0], of, lv) for lw in laws for cp in couplings for of in offsets[1:]
-        ]
+        plan = []
+        for dr in directions:
+            cps = couplings_in(dr)
+            plan += [
+                (lw, cp, ac, offsets[0], lv, dr) for lw in laws for cp in cps for ac in actuators
+            ]
+            plan += [
+                (lw, cp, actuators[0], of, lv, dr)
+                for lw in laws
+                for cp in cps
+                for of in offsets[1:]
+            ]
         for names in plan[1:]:
-            ahead.call(functools.partial(_compile_lm, data, names, noise, settings, direction))
+            ahead.call(functools.partial(_compile_lm, data, names, noise, settings))
         candidates: dict[str, FitResult] = {}
 
         def fit_one(
-            lw: str, cp: str, ac: str, of: str, start: FitResult | None, lvl: str = lv
+            lw: str,
+            cp: str,
+            ac: str,
+            of: str,
+            start: FitResult | None,
+            lvl: str = lv,
+            dr: str = directions[0],
         ) -> FitResult:
-            return fit_model(
-                data, lw, cp, seed, n_starts, noise, ac, start, of, settings, lvl, direction
-            )
+            return fit_model(data, lw, cp, seed, n_starts, noise, ac, start, of, settings, lvl, dr)
 
-        for lw in laws:
-            for cp in couplings:
+        for dr, lw in ((dr, lw) for dr in directions for lw in laws):
+            cps = couplings_in(dr)
+            for cp in cps:
                 # the simplest actuator model first (multi-start), each richer one nested
                 # in it from its optimum; then each richer offset model nested in the
                 # best of them (both registries list the simplest model first)
                 group: dict[str, FitResult] = {}
                 nested = None
                 for ac in actuators:
-                    key = _key(lw, cp, ac, offsets[0], lv)
+                    key = _key(lw, cp, ac, offsets[0], lv, dr)
                     say(f"fitting {key}")
-                    result = fit_one(lw, cp, ac, offsets[0], nested)
-                    if nested is None and cp != couplings[0]:
+                    result = fit_one(lw, cp, ac, offsets[0], nested, dr=dr)
+                    if nested is None and cp != cps[0]:
                         # a saturating law also from the simplest law's optimum (its load
                         # scale far above every alpha N): the multi-start may miss the
                         # basin where the law is all but the simplest one (data that do
                         # not saturate: 8 starts found the low-Kt basin instead, 6x off)
-                        simplest = candidates[_key(lw, couplings[0], ac, offsets[0], lv)]
-                        result = _better(result, fit_one(lw, cp, ac, offsets[0], simplest))
+                        simplest = candidates[_key(lw, cps[0], ac, offsets[0], lv, dr)]
+                        result = _better(result, fit_one(lw, cp, ac, offsets[0], simplest, dr=dr))
                     if variability and not candidates and not group:
                         # the first fit tells the levels model's shapes
                         ahead.call(functools.partial(compile_variability, result))
@@ -279,8 +435,8 @@ def fit_dataset(
                 base = min(group.values(), key=lambda f: f.bic)
                 ac = base.model.actuator.name
                 for of in offsets[1:]:
-                    say(f"fitting {_key(lw, cp, ac, of, lv)}")
-                    group[_key(lw, cp, ac, of, lv)] = fit_one(lw, cp, ac, of, base)
+                    say(f"fitting {_key(lw, cp, ac, of, lv, dr)}")
+                    group[_key(lw, cp, ac, of, lv, dr)] = fit_one(lw, cp, ac, of, base, dr=dr)
                 candidates |= group
         ranked = sorted(candidates.items(), key=lambda kv: kv[1].bic)
         best_key, best = ranked[0]
@@ -289,15 +445,17 @@ def fit_dataset(
             tried = drifting_levels(best)
             m = best.model
             lw, cp, ac, of = m.law.name, m.coupling.name, m.actuator.name, m.offset.name
+            dr = m.direction.name
             for lvl in tried:
-                say(f"fitting {_key(lw, cp, ac, of, lvl)} (the steady fit's plateaus drift)")
-                candidates[_key(lw, cp, ac, of, lvl)] = fit_one(lw, cp, ac, of, best, lvl)
-                plain = candidates.get(_key(lw, cp, ac, offsets[0], lv))
+                key = _key(lw, cp, ac, of, lvl, dr)
+                say(f"fitting {key} (the steady fit's plateaus drift)")
+                candidates[key] = fit_one(lw, cp, ac, of, best, lvl, dr)
+                plain = candidates.get(_key(lw, cp, ac, offsets[0], lv, dr))
                 if lvl == "creeping" and of != offsets[0] and plain is not None:
                     # a creep modelled, the offset may have nothing left to drift by
-                    key = _key(lw, cp, ac, offsets[0], lvl)
+                    key = _key(lw, cp, ac, offsets[0], lvl, dr)
                     say(f"fitting {key} (the steady fit's plateaus drift)")
-                    candidates[key] = fit_one(lw, cp, ac, offsets[0], plain, lvl)
+                    candidates[key] = fit_one(lw, cp, ac, offsets[0], plain, lvl, dr)
             ranked = sorted(candidates.items(), key=lambda kv: kv[1].bic)
             best_key, best = ranked[0]
         say(f"checking the intervals of {best_key}")
@@ -330,28 +488,22 @@ def fit_dataset(
             best = candidates[best_key] = with_variability(best)
         # levels drifting within their plateaus (a fading horn, a creeping level)
         best = candidates[best_key] = with_plateau_drift(best)
-        weights = coupling_weights(candidates)
-        chosen = weights[best.model.coupling.name]
+        # the models predictions average over: each coupling law's best, or each
+        # (coupling law, direction) pair's when the directions were compared
+        compared = compared_choices(candidates)
+        weights = choice_weights(candidates, lambda f: model_label(f.model, compared))
+        chosen = weights[model_label(best.model, compared)]
         alternates = {}
         for w in weights.values():
             if w is not chosen and w.bic_weight >= MIN_LAW_WEIGHT:
                 say(f"the levels model of {w.key} (BIC weight {w.bic_weight:.3f})")
                 fit = candidates[w.key]
-                alternates[w.law] = with_variability(fit) if variability else fit
-        rivals = [w for w in weights.values() if w is not chosen and w.bic_weight > 0.05]
-        if rivals:  # the data do not single out the coupling's shape
-            run_warnings.append(
-                Diagnostic(
-                    "coupling_laws",
-                    f"the coupling laws fit comparably (BIC weight {chosen.law} "
-                    f"{chosen.bic_weight:.2f}, "
-                    + ", ".join(f"{w.law} {w.bic_weight:.2f}" for w in rivals)
-                    + "): the estimates are the chosen law's; predictions average the laws "
-                    "by their BIC weights, so where the laws disagree (between or beyond the "
-                    "measured operating points) the bands include their spread",
-                    bic_weights={w.law: w.bic_weight for w in (chosen, *rivals)},
-                )
-            )
+                alternates[w.name] = with_variability(fit) if variability else fit
+        for choice, option in CHOICES.items():  # the data do not single out the option
+            table = choice_table(candidates, choice)
+            warning = comparable_warning(choice, table, option(best.model))
+            if warning is not None:
+                run_warnings.append(warning)
         best = candidates[best_key] = dataclasses.replace(
             best, notes=[*best.notes, kt_through_coupling(best.model.coupling.name, pairs)]
         )
@@ -377,6 +529,11 @@ def fit_dataset(
                 f"; {len(pairs)} load and amplitude pair(s) pulled at two or more speeds, "
                 "which pin Kt whatever the coupling law: the power limit and the load-power "
                 "law were tried"
+            )
+        if auto_direction and len(directions) > 1:
+            table = direction_weights(candidates)
+            reason += "; directions of vibration by BIC weight: " + ", ".join(
+                f"{w.name} {w.bic_weight:.3f}" for w in table.values()
             )
         if coupling == "auto" and single_load:
             reason += (
@@ -437,15 +594,14 @@ def drifting_levels(result: FitResult) -> tuple[str, ...]:
 
 def _compile_lm(
     data: FitData,
-    names: tuple[str, str, str, str, str],
+    names: tuple[str, str, str, str, str, str],
     noise: str,
     settings,
-    direction: str = DEFAULT_DIRECTION,
 ) -> None:
     """Compile the Levenberg-Marquardt program of the model ``names`` (law, coupling,
-    actuator, offset, level) in ``direction``."""
-    lw, cp, ac, of, lvl = names
-    model = bench_model(data, lw, cp, noise, ac, of, settings, lvl, direction)
+    actuator, offset, level, direction)."""
+    lw, cp, ac, of, lvl, dr = names
+    model = bench_model(data, lw, cp, noise, ac, of, settings, lvl, dr)
     lm_program.compile_ahead(*lm_arguments(model))
 
 

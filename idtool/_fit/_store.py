@@ -46,9 +46,9 @@ def write_artefact(folder: Path, artefact: FitArtefact) -> None:
 
 def read_states(folder: Path, doc: Mapping[str, Any]) -> dict[str, dict[str, np.ndarray]]:
     """The state arrays of ``folder``'s fit: ``fit_state.npz`` and each kept law's."""
-    names = [FIT_STATE.name] + [
-        w["state_file"] for w in doc.get("coupling_laws", []) if "state_file" in w
-    ]
+    kept = [*doc.get("coupling_laws", []), *doc.get("model_weights", [])]
+    files = dict.fromkeys(w["state_file"] for w in kept if "state_file" in w)
+    names = [FIT_STATE.name, *files]
     states = {}
     for name in names:
         path = folder / name

@@ -145,7 +145,7 @@ def _laws(fit: FitArtefact, goal: str) -> list[tuple[str, float, LawFit]]:
     """(name, weight, LawFit) of the coupling laws the plan uses: every law the fit kept
     (weights renormalised over them), or only the chosen one for ``parameters``."""
     chosen = fit.chosen
-    out = [(chosen.model.coupling.name, fit.chosen_weight, chosen)]
+    out = [(fit.chosen_label, fit.chosen_weight, chosen)]
     if goal != "parameters":
         out += [(name, w, law) for name, (w, law) in fit.alternates.items()]
     total = sum(w for _, w, _ in out)

@@ -93,4 +93,4 @@ def fit_draws(
             cond,
             chosen.theta_given_sds,
         )
-    return average_over_laws(primary, fit.chosen_weight, fit.alternates, seed)
+    return average_over_laws(primary, fit.chosen_weight, fit.alternates, seed, fit.chosen_label)

@@ -46,46 +46,63 @@ DISAGREE_WEIGHT = 0.05
 
 
 def average_over_laws(
-    primary: Draws, chosen_weight: float, others: Mapping[str, tuple[float, Any]], seed: int = 0
+    primary: Draws,
+    chosen_weight: float,
+    others: Mapping[str, tuple[float, Any]],
+    seed: int = 0,
+    chosen_label: str | None = None,
 ) -> Draws:
     """``primary`` (the chosen law's draws) pooled with draws of each other law in
     ``others`` (law -> (BIC weight, its fit: ``model``, ``z``, ``cov_z``, ``sd_grids``,
     ``conditioning``, ``theta_given_sds``)), each law's share of ``primary.n`` draws
-    its weight's; the weights renormalised over the laws kept."""
+    its weight's; the weights renormalised over the laws kept. ``chosen_label``: the
+    chosen model's name among them (default its coupling law's; with the directions
+    compared, ``others`` names models by direction too, :func:`idtool._fit._run.model_label`)."""
     if not others:
         return primary
-    chosen = primary.model.coupling.name
+    chosen = primary.model.coupling.name if chosen_label is None else chosen_label
     weights = {chosen: chosen_weight} | {law: w for law, (w, _) in others.items()}
     total = sum(weights.values())
     weights = {law: w / total for law, w in weights.items()}
     n = primary.n
-    first = primary.subset(_thin(n, max(round(n * weights[chosen]), 1)))
+    first = dataclasses.replace(
+        primary.subset(_thin(n, max(round(n * weights[chosen]), 1))), label=chosen
+    )
     parts = []
     for i, (law, (_, fit)) in enumerate(others.items()):
         count = round(n * weights[law])
         if count < 1:
             continue
-        parts.append(
-            draws_from_covariance(
-                fit.model,
-                fit.z,
-                fit.cov_z,
-                count,
-                seed + 1 + i,
-                fit.sd_grids,
-                fit.conditioning,
-                fit.theta_given_sds,
-            )
+        part = draws_from_covariance(
+            fit.model,
+            fit.z,
+            fit.cov_z,
+            count,
+            seed + 1 + i,
+            fit.sd_grids,
+            fit.conditioning,
+            fit.theta_given_sds,
         )
+        parts.append(dataclasses.replace(part, label=law))
     shares = ", ".join(
         f"{law} {w:.2f} ({'its fit covariance' if law != chosen else primary.source})"
         for law, w in weights.items()
     )
     note = (
-        f"{primary.note}; averaged over coupling laws by BIC weight: {shares} "
+        f"{primary.note}; averaged over {_what(others, primary)} by BIC weight: {shares} "
         f"({sum(d.n for d in (first, *parts))} draws pooled)"
     )
     return dataclasses.replace(first, mixture=tuple(parts), law_weights=weights, note=note)
+
+
+def _what(others: Mapping[str, tuple[float, Any]], primary: Draws) -> str:
+    """What the models averaged over differ in: coupling laws, directions or both."""
+    fits = [fit for _, fit in others.values()]
+    directions = {primary.model.direction.name, *(f.model.direction.name for f in fits)}
+    couplings = {primary.model.coupling.name, *(f.model.coupling.name for f in fits)}
+    if len(directions) == 1:
+        return "coupling laws"
+    return "directions of vibration" if len(couplings) == 1 else "coupling laws and directions"
 
 
 def law_disagreement_notes(rows: Sequence[Prediction], weights: Mapping[str, float]) -> list[str]:

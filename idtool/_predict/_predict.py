@@ -65,6 +65,8 @@ class Draws:
     # pool them with these (:mod:`idtool._predict._mixture`); law -> weight of each
     mixture: tuple[Draws, ...] = ()
     law_weights: dict[str, float] = dataclasses.field(default_factory=dict)
+    # this component's name in ``law_weights`` (its coupling law's when empty)
+    label: str = ""
 
     @property
     def n(self) -> int:
@@ -369,7 +371,8 @@ def predict_friction_ratio(draws: Draws, loads_n, amplitudes, speeds_m_s) -> lis
     # each law's own median curve, for the report and to show where the laws disagree
     medians, start = [], 0
     for c in draws.components:
-        medians.append((c.model.coupling.name, np.median(mean[start : start + c.n], axis=0)))
+        name = c.label or c.model.coupling.name
+        medians.append((name, np.median(mean[start : start + c.n], axis=0)))
         start += c.n
     return [
         dataclasses.replace(p, by_law=tuple((law, float(m[i])) for law, m in medians))

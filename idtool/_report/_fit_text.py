@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -13,7 +14,7 @@ from idtool._fit._folder import FIT_SCHEMA_VERSION, RESIDUALS_PNG, TRACES_PNG, l
 from idtool._fit._plateau_drift import MIN_RELATIVE_CHANGE, P_ALARM
 from idtool._fit._program import prediction_at
 from idtool._fit._result import Estimate, FitResult
-from idtool._fit._run import FitRun
+from idtool._fit._run import ChoiceWeight, FitRun
 from idtool._plotting import MAX_WIDTH_IN, save_figure, subplots
 from idtool._provenance import provenance
 from idtool._version import __version__
@@ -160,6 +161,7 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
             w.to_dict() | ({"state_file": law_state_file(w.law)} if w.law in run.alternates else {})
             for w in run.coupling_weights.values()
         ],
+        **_direction_tables(run),
         "multistart": [
             {
                 "rss": o["rss"],
@@ -189,6 +191,42 @@ def fit_json(run: FitRun, dataset_path: str | None, argv: list[str] | None) -> d
         "versions": prov["versions"],
         "created_utc": prov["created_utc"],
     }
+
+
+def _direction_tables(run: FitRun) -> dict[str, Any]:
+    """``direction="auto"``'s records: each direction's best candidate and weights
+    (``directions``), and the models predictions average over (``model_weights``: each
+    direction's, or each coupling law and direction pair's, with the state file of each
+    kept beside the chosen one); nothing when one direction was fitted."""
+    if "direction" not in run.compared:
+        return {}
+    return {
+        "directions": [w.to_dict("direction") for w in run.direction_weights.values()],
+        "model_weights": [
+            w.to_dict("model")
+            | ({"state_file": law_state_file(w.name)} if w.name in run.alternates else {})
+            for w in run.model_weights.values()
+        ],
+    }
+
+
+def _choice_lines(title: str, what: str, weights: dict[str, ChoiceWeight]) -> list[str]:
+    """A model choice's table for the text report (nothing for a single option)."""
+    if len(weights) < 2:
+        return []
+    width = max(len(n) for n in weights)
+    best = next(iter(weights.values())).bic
+    lines = [
+        f"[[{title}]]  (each {what}'s best model; weights exp(-delta/2), normalised: "
+        f"BIC's ~ the {what}'s posterior probability, AIC's its predictive standing)"
+    ]
+    for w in weights.values():
+        flag = "  comparable" if w.bic_weight > 0.05 and w.bic > best else ""
+        lines.append(
+            f"    {w.name:{width}s}  BIC weight {w.bic_weight:6.3f}  AIC weight "
+            f"{w.aic_weight:6.3f}  dBIC {w.bic - best:7.1f}  ({w.key}){flag}"
+        )
+    return lines
 
 
 def _relaxing(r: FitResult) -> bool:
@@ -331,18 +369,8 @@ def fit_report(run: FitRun) -> str:
         lines.append(
             f"    {key:{width}s}  AIC {c.aic:10.1f}  BIC {c.bic:10.1f}  dBIC {c.bic - best:7.1f}"
         )
-    laws = run.coupling_weights
-    if len(laws) > 1:
-        lines.append(
-            "[[Coupling laws]]  (each law's best model; weights exp(-delta/2), normalised: "
-            "BIC's ~ the law's posterior probability, AIC's its predictive standing)"
-        )
-        width = max(len(n) for n in laws)
-        for w in laws.values():
-            lines.append(
-                f"    {w.law:{width}s}  BIC weight {w.bic_weight:6.3f}  AIC weight "
-                f"{w.aic_weight:6.3f}  ({w.key})"
-            )
+    lines += _choice_lines("Coupling laws", "law", run.coupling_weights)
+    lines += _choice_lines("Directions of vibration", "direction", run.direction_weights)
     lines.append("[[Friction ratio at each operating point]]")
     seen = set()
     for i in range(d.n_traces):

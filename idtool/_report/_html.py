@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import html
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -188,12 +189,37 @@ def _model_line(fit: FitArtefact) -> str:
     if m.direction.name != "along":
         line += f", vibration {m.direction.name}"
     if fit.alternates:
-        weights = {law: w["bic_weight"] for law, w in fit.coupling_laws.items()}
-        kept = [m.coupling.name, *fit.alternates]
-        line += "; predictions averaged over the coupling laws by BIC weight: " + ", ".join(
+        table = fit.model_weights or fit.coupling_laws
+        weights = {law: w["bic_weight"] for law, w in table.items()}
+        kept = [fit.chosen_label, *fit.alternates]
+        what = "models (coupling law and direction)" if fit.model_weights else "coupling laws"
+        line += f"; predictions averaged over the {what} by BIC weight: " + ", ".join(
             f"{law} {weights.get(law, 0.0):.2f}" for law in kept
         )
     return line
+
+
+def _choice_table(title: str, what: str, entries: Mapping[str, Mapping[str, Any]]) -> str:
+    """A model choice's BIC table (each option's best model and weights), options that
+    fit comparably (BIC weight above 0.05 beside the chosen) flagged; nothing for one."""
+    if len(entries) < 2:
+        return ""
+    rows, best = [], min(float(e["bic"]) for e in entries.values())
+    for name, e in entries.items():
+        close = float(e["bic_weight"]) > 0.05 and float(e["bic"]) > best
+        rows.append(
+            [
+                name,
+                f"{float(e['bic']) - best:.1f}",
+                f"{float(e['bic_weight']):.3f}",
+                f"{float(e['aic_weight']):.3f}",
+                str(e["key"]),
+                "fits comparably" if close else ("chosen" if float(e["bic"]) == best else ""),
+            ]
+        )
+    return f"<h3>{html.escape(title)}</h3>" + table(
+        [what, "delta BIC", "BIC weight", "AIC weight", "best model", ""], rows
+    )
 
 
 def _report_id(folder: Path, targets: Sequence[float], loads_n: Sequence[float]) -> str:
@@ -361,12 +387,17 @@ def write_report(
         )
 
         sec["Held-out validation"] = validation_section(folder)
-        sec["Model comparison"] = f"<p>{html.escape(summary.choice)}</p>" + table(
-            ["model", "AIC", "BIC", "log L", "parameters"],
-            [
-                [m.model, f"{m.aic:.1f}", f"{m.bic:.1f}", f"{m.loglik:.1f}", m.n_params]
-                for m in summary.model_comparison
-            ],
+        sec["Model comparison"] = (
+            f"<p>{html.escape(summary.choice)}</p>"
+            + _choice_table("Coupling laws", "law", fit.coupling_laws)
+            + _choice_table("Directions of vibration", "direction", fit.directions)
+            + table(
+                ["model", "AIC", "BIC", "log L", "parameters"],
+                [
+                    [m.model, f"{m.aic:.1f}", f"{m.bic:.1f}", f"{m.loglik:.1f}", m.n_params]
+                    for m in summary.model_comparison
+                ],
+            )
         )
         warnings = list(fit.warnings) + ([] if meta is None else meta.get("warnings", []))
         sec["Warnings"] = (

@@ -26,8 +26,10 @@ from typing import Any
 
 from idtool._data._dataset import Rig, TransducerSpec
 from idtool._data._schema import schema_problems
-from idtool._errors import IdtoolError
+from idtool._errors import IdtoolError, Problem
 from idtool._jsonio import parse_json
+from idtool._model._coupling import reacts_on_vibration
+from idtool._model._names import DEFAULT_DIRECTION
 from idtool._simulate._block_noise import block_noise_problems
 from idtool._simulate._records import (
     ActuatorParams,
@@ -172,6 +174,20 @@ class BenchParams:
         noise = noise_record(d["block_mean_noise"]) if "block_mean_noise" in d else None
         if noise is not None and (problems := block_noise_problems(noise, file)):
             raise IdtoolError(f"{file}: invalid simulator parameters", problems)
+        contact, coupling = contact_record(d["contact"]), coupling_record(d["coupling"])
+        if contact.direction != DEFAULT_DIRECTION and reacts_on_vibration(coupling.part):
+            raise IdtoolError(
+                f"{file}: invalid simulator parameters",
+                [
+                    Problem(
+                        f"the {coupling.law!r} coupling law solves the horn's balance with "
+                        "the vibration along the sliding; with direction "
+                        f"{contact.direction!r} choose another coupling law",
+                        file,
+                        column="contact.direction",
+                    )
+                ],
+            )
         return cls(
             name=d["name"],
             material=d["material"],
@@ -187,8 +203,8 @@ class BenchParams:
                 ),
                 transducer=TransducerSpec.from_dict(d["rig"].get("transducer")),
             ),
-            contact=contact_record(d["contact"]),
-            coupling=coupling_record(d["coupling"]),
+            contact=contact,
+            coupling=coupling,
             actuator=actuator_record(d["actuator"]),
             horn_switching=SwitchingParams(**_floats(d["horn_switching"])),
             load_cell=LoadCellParams(**_floats(d["load_cell"])),

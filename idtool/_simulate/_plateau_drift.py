@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from idtool._model._contact import prescribed_cycle_average
+from idtool._model._directions import AbstractDirection, Along
 from idtool._model._laws import AbstractFrictionLaw
 from idtool._simulate._params import BenchParams
 from idtool._simulate._truth import TraceTruth
@@ -67,9 +67,11 @@ def fade_factor(time_s: np.ndarray, horn_on_s: tuple[float, float], fraction: fl
     return 1.0 - fraction * (1.0 - np.exp(-t_on / tau_s))
 
 
-@functools.partial(jax.jit, static_argnames=("n",))
-def _friction_ratios(law, speed_m_s, w_rad_s, amplitudes_m, n=FADE_GRID):
-    one = lambda a: prescribed_cycle_average(law, speed_m_s, a, w_rad_s).friction_ratio  # noqa: E731
+@functools.partial(jax.jit, static_argnames=("n", "direction"))
+def _friction_ratios(law, speed_m_s, w_rad_s, amplitudes_m, load_n, direction, n=FADE_GRID):
+    def one(a):
+        return direction.cycle_average(law, speed_m_s, a, w_rad_s, load_n).friction_ratio
+
     return jax.vmap(one)(jnp.reshape(amplitudes_m, (n,)))
 
 
@@ -79,14 +81,18 @@ def fade_ratio_curve(
     vibration_frequency_hz: float,
     slip_amplitude_m: float,
     fraction: float,
+    load_n: float = 1.0,
+    direction: type[AbstractDirection] = Along,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Amplitude factors ``g`` from ``1 - fraction`` to 1 and ``FR(g a0) / FR(a0)`` [-]
     there: how much the ON level rises when the slip amplitude ``a0`` [m] has faded to
-    ``g a0`` (the contact ``law`` at its load, sliding at ``speed_m_s`` [m/s], vibrating
-    at ``vibration_frequency_hz`` [Hz])."""
+    ``g a0`` (the contact ``law`` at its load ``load_n`` [N], sliding at ``speed_m_s``
+    [m/s], vibrating at ``vibration_frequency_hz`` [Hz] in ``direction``)."""
     g = np.linspace(1.0 - fraction, 1.0, FADE_GRID)
     w = 2.0 * math.pi * vibration_frequency_hz
-    fr = np.asarray(_friction_ratios(law, speed_m_s, w, g * slip_amplitude_m))
+    fr = np.asarray(
+        _friction_ratios(law, speed_m_s, w, g * slip_amplitude_m, load_n, direction=direction)
+    )
     return g, fr / fr[-1]
 
 
@@ -150,6 +156,8 @@ def on_level_over_time_n(params: BenchParams, trace: TraceTruth, time_s: np.ndar
         params.rig.vibration_frequency_hz,
         trace.slip_amplitude_m,
         fading.fade_fraction,
+        trace.normal_load_n,
+        params.contact.direction_model,
     )
     factor = fade_factor(time_s, trace.horn_on_s, fading.fade_fraction, fading.fade_time_constant_s)
     # an ON level cannot rise above the OFF level (FR <= 1)

@@ -31,8 +31,9 @@ from jaxtyping import ArrayLike
 from idtool._errors import IdtoolError
 from idtool._model._actuator import ACTUATORS, AbstractActuator
 from idtool._model._coupling import COUPLINGS, AbstractCoupling
+from idtool._model._directions import DIRECTIONS, AbstractDirection
 from idtool._model._laws import FRICTION_LAWS, AbstractFrictionLaw
-from idtool._model._names import DEFAULT_ACTUATOR
+from idtool._model._names import DEFAULT_ACTUATOR, DEFAULT_DIRECTION
 from idtool._model._noise import NOISE_MODELS, AbstractNoise
 from idtool._simulate._truth_coupling import TRUTH_ONLY_COUPLINGS
 
@@ -68,12 +69,19 @@ class ContactParams(_PartParams):
     """The true contact: the friction law ``friction_law`` with its numbers (mu as
     ``friction_coefficient`` [-], ...); optionally mu creeping by
     ``level_creep_per_s`` [1/s] of itself per second of sliding
-    (:mod:`idtool._simulate._plateau_drift`)."""
+    (:mod:`idtool._simulate._plateau_drift`); the vibration in ``direction`` (a name of
+    :data:`idtool.DIRECTIONS`, default along the sliding)."""
 
     part: ClassVar[type[AbstractFrictionLaw]]
     friction_law: str
     friction_coefficient: float
     level_creep_per_s: float = 0.0
+    direction: str = DEFAULT_DIRECTION
+
+    @property
+    def direction_model(self) -> type[AbstractDirection]:
+        """The direction of vibration's class (:data:`idtool.DIRECTIONS`)."""
+        return DIRECTIONS.get(self.direction)
 
     def law_at(
         self, normal_load_n: ArrayLike, friction_coefficient: ArrayLike | None = None
@@ -180,7 +188,11 @@ def _record(base: Any, part: Any) -> type[_PartParams]:
 def _build(base: Any, part: Any, kind: Mapping[str, str], section: Mapping[str, Any]) -> Any:
     """The record of ``part`` from its file ``section``, ``kind`` the field naming it."""
     numbers = {f.name: float(section[f.name]) for f in part.truth_fields() if f.name in section}
-    common = {k: float(v) for k, v in section.items() if k not in numbers and k not in kind}
+    common = {
+        k: v if isinstance(v, str) else float(v)  # a name (the contact's direction) as is
+        for k, v in section.items()
+        if k not in numbers and k not in kind
+    }
     return _record(base, part)(**kind, **common, **numbers)
 
 

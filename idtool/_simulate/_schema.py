@@ -18,9 +18,10 @@ import sys
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from idtool._model._names import DEFAULT_ACTUATOR
+from idtool._model._directions import DIRECTIONS
+from idtool._model._names import DEFAULT_ACTUATOR, DEFAULT_DIRECTION
 from idtool._simulate._records import actuator_models, coupling_laws, friction_laws, noise_models
-from idtool._simulate._schema_fixed import FIXED, LEVEL_CREEP, PULL_START
+from idtool._simulate._schema_fixed import DIRECTION, FIXED, LEVEL_CREEP, PULL_START
 
 __all__ = ["schema_text", "simulator_params_schema"]
 
@@ -86,6 +87,16 @@ def _section(
     }
 
 
+def _direction() -> dict[str, Any]:
+    """The contact's ``direction`` field: the registered directions, each in words."""
+    out = copy.deepcopy(DIRECTION)
+    out["enum"] = list(DIRECTIONS.names())
+    out["default"] = DEFAULT_DIRECTION
+    names = " ".join(f"'{n}': {DIRECTIONS.get(n).description}." for n in DIRECTIONS.names())
+    out["description"] += f" {names}"
+    return out
+
+
 def simulator_params_schema() -> dict[str, Any]:
     """The schema of the simulator's parameter file for the parts registered now."""
     schema: dict[str, Any] = copy.deepcopy(FIXED)
@@ -95,7 +106,7 @@ def simulator_params_schema() -> dict[str, Any]:
         "friction_law",
         "Friction law of the contact (registered in idtool._model._laws.FRICTION_LAWS).",
         "The true contact model (model notes §1): a friction law and its parameters.",
-        {"level_creep_per_s": LEVEL_CREEP},
+        {"level_creep_per_s": LEVEL_CREEP, "direction": _direction()},
         (),
     )
     properties["coupling"] = _section(

@@ -7,13 +7,24 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["FIXED", "LEVEL_CREEP", "PULL_START"]
+__all__ = ["DIRECTION", "FIXED", "LEVEL_CREEP", "PULL_START"]
 
 # The contact's optional creep of the friction level (every law).
 LEVEL_CREEP: dict[str, Any] = {
     "type": "number",
     "default": 0,
     "description": "Optional, default 0: relative creep rate of the friction coefficient with sliding time [1/s]: mu(t) = friction_coefficient * (1 + level_creep_per_s * max(t - pull_start_s, 0)), so the OFF and ON levels both creep by this fraction of themselves per second (unlike the load cell's additive offset drift, which moves every level by the same newtons and the baseline before the pull too). Truth only: the fit's levels are constant.",
+}
+# The vibration's direction relative to the sliding (every law); its names are the
+# registry's, filled in by idtool._simulate._schema.
+DIRECTION: dict[str, Any] = {
+    "type": "string",
+    "default": "along",
+    "description": "Optional, default 'along': the direction of the vibration relative to "
+    "the sliding, a name of idtool.DIRECTIONS ('idtool fit --direction' takes the same "
+    "names). The contact's cycle average follows it; the coupling law gives the slip "
+    "amplitude in every direction (the 'sdof' law, whose contact loads the horn, along "
+    "only).",
 }
 # The actuator's pull start (every model).
 PULL_START: dict[str, Any] = {

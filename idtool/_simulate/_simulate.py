@@ -98,9 +98,9 @@ def experiment_plan(params: BenchParams) -> tuple[OperatingPoint, ...]:
     return tuple(points)
 
 
-# one compiled program per law and coupling type (the sdof law's solve is a loop, slow
-# op by op)
-_contact_at = jax.jit(on_contact)
+# one compiled program per law and coupling type and direction (the sdof law's solve is a
+# loop, slow op by op)
+_contact_at = jax.jit(on_contact, static_argnames=("direction",))
 
 
 def operating_point(
@@ -119,7 +119,14 @@ def operating_point(
     fr, a = (
         float(x)
         for x in _contact_at(
-            law, coupling, load_n, alpha, v, rig.vibration_frequency_hz, rig.max_amplitude_m
+            law,
+            coupling,
+            load_n,
+            alpha,
+            v,
+            rig.vibration_frequency_hz,
+            rig.max_amplitude_m,
+            direction=c.direction_model,
         )
     )
     return {

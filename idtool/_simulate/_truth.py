@@ -131,6 +131,9 @@ class BenchTruth:
             **contact.values(),  # mu and the law's own parameters, by their file names
             "coupling": self.params.to_dict()["coupling"],
             "coupling_in_fit": self.params.coupling.in_fit,
+            # the direction of vibration simulated (idtool.DIRECTIONS; 'idtool fit
+            # --direction' names the model that can represent it)
+            "direction": contact.direction,
             "operating_points": [dataclasses.asdict(o) for o in self.operating_points],
             "traces": [dataclasses.asdict(t) for t in self.traces],
             "params": self.params.to_dict(),
