@@ -41,6 +41,7 @@ from idtool._fit._result import Estimate, FitResult
 from idtool._fit._summary import FitSummary, estimate_of_doc, fit_summary
 from idtool._fit._variability import SD_PARAMS, ThetaGivenSds
 from idtool._model._benchmodel import BenchModel
+from idtool._model._names import DEFAULT_DIRECTION
 from idtool._model._settings import ParameterSetting
 from idtool._model._spec import ModelSpec
 
@@ -330,10 +331,14 @@ def _sentences(doc: Mapping[str, Any], key: str) -> tuple[str, ...]:
 
 def _spec(doc: Mapping[str, Any], coupling: str, key: str | None = None) -> ModelSpec:
     """The model spec of ``fit.json``'s chosen model, or of another coupling law's from
-    its ``key`` (law/coupling/actuator/offset[/level])."""
+    its ``key`` (law/coupling/actuator/offset[/level][@direction]). A key that names no
+    direction is in the chosen model's, or along the sliding where the directions were
+    compared (``model_weights``: there a key names every other direction)."""
     settings = tuple(ParameterSetting.from_dict(s) for s in doc.get("parameter_settings", []))
     noise = str(doc["noise"].get("name", "ar1"))
     direction = str(doc.get("direction", {}).get("name", "along"))  # before: along
+    if key is not None and "model_weights" in doc:
+        direction = DEFAULT_DIRECTION
     if key is not None:
         return ModelSpec.from_key(key, noise, settings, direction)
     return ModelSpec(

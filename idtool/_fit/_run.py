@@ -268,8 +268,8 @@ _COMPARABLY = {
         "the directions of vibration",
         "the estimates are the chosen direction's (Kt and the coupling's slip amplitude "
         "mean different things in each); predictions average the directions by their BIC "
-        "weights, so where they disagree the bands include their spread. A vibrometer "
-        "reading of the horn tip's motion, or pulls at two speeds, would tell them apart",
+        "weights, so where they disagree the bands include their spread. A measurement of "
+        "the horn tip's motion relative to the sliding would settle the direction",
     ),
 }
 
