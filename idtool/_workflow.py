@@ -171,6 +171,14 @@ class Fit:
         return dict(self.artefact.coupling_laws)
 
     @property
+    def directions(self) -> dict[str, dict[str, float | str]]:
+        """Each direction of vibration fitted with ``direction="auto"`` (best first): its
+        best candidate's ``key``, ``bic``, ``aic`` and Akaike/Schwarz weights, as
+        :attr:`coupling_laws` gives the coupling laws'; empty when one direction was
+        fitted."""
+        return dict(self.artefact.directions)
+
+    @property
     def result(self) -> FitResult:
         """The chosen model's full fit result (in memory only, not after load_fit)."""
         if self.run is None:

@@ -159,7 +159,7 @@ def test_auto_picks_the_simulated_direction(auto_fits, direction):
     _, fit = auto_fits[direction]
     chosen = fit.artefact.chosen
     assert chosen.model.direction.name == direction
-    table = fit.artefact.directions
+    table = fit.directions
     assert set(table) == set(DIRECTIONS)
     assert next(iter(table)) == direction  # best first
     assert table[direction]["bic_weight"] > 0.99

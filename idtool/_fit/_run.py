@@ -19,6 +19,15 @@ an ON level drifting within its window tries the relaxing ON level, an OFF level
 since a creep modelled leaves the offset nothing to drift by), and BIC decides. Trying
 them only then keeps the fit of stationary data as fast as before; the trigger's false
 alarm rate is the diagnostic's, 1e-3 per kind of plateau.
+
+The direction of vibration is chosen the same way on request (``direction="auto"``):
+every registered direction is fitted with every coupling law the run fits (the product,
+since the coupling law sets the slip amplitude and the direction the friction ratio it
+gives, so a wrong pair can stand in for the right one), and one mechanism ranks both
+choices (:func:`choice_weights`: each option's best candidate, its BIC and AIC weights;
+:func:`comparable_warning` when others hold more than 5% of the BIC weight). The models
+predictions average over are then each (coupling law, direction) pair's best
+(:func:`model_label`).
 """
 
 from __future__ import annotations
