@@ -178,7 +178,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         f"(default {DEFAULT_DIRECTION}, the seed paper's model), transverse (in the contact "
         "plane, across the sliding), normal (out of plane: the indentation oscillates); "
         "auto fits every direction (with every coupling law fitted) and keeps the lowest "
-        "BIC, the others kept by BIC weight for predictions (3-8x a fit's time)",
+        "BIC, the others kept by BIC weight for predictions (2-5x the time of a fit "
+        "along on the example)",
     )
     p.add_argument(
         "--noise",
