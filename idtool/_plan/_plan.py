@@ -163,7 +163,8 @@ def _checked_laws(fit: FitArtefact, goal: str) -> list[tuple[str, float, LawFit]
         raise IdtoolError(f"goal {goal!r}: choose one of {', '.join(GOALS)}")
     if fit.chosen.levels is None:
         raise IdtoolError(
-            "the fit has no levels model (fitted with variability off): fit again with it on"
+            "the fit has no levels model (fitted with variability off, or its scatter and "
+            "discrepancy could not be estimated: see the fit's warnings)"
         )
     laws_used = _laws(fit, goal)
     if goal == "laws" and len(laws_used) < 2:

@@ -180,5 +180,5 @@ def _check(plan: Plan, sampled: bool) -> str:
     return (
         f"Averaged over {N_CHECK_DRAWS} parameter draws from {where}, the model "
         f"re-linearised at each: planned {g(b['planned'][0])}, uniform grid "
-        f"{g(b['uniform'][0])}. " + "; ".join(plan.notes) + "."
+        f"{g(b['uniform'][0])}. Approximations: " + "; ".join(plan.notes) + "."
     )
