@@ -365,6 +365,123 @@ def test_printing_puts_the_answer_alone_on_page_one(fitted, tmp_path):
     page1 = text(1, 1)
     assert "Answer" in page1 and "amplitude for 50% reduction" in page1
     assert "Estimates" not in page1
-    assert text(2, 2).lstrip().startswith("Dataset")
+    # then the next pulls (this fit misses the default goal), then the evidence
+    assert text(2, 2).lstrip().startswith("What to measure next")
     info = subprocess.run(["pdfinfo", str(pdf)], capture_output=True, text=True).stdout
     assert "pts (A4)" in info
+
+
+# --- "What to measure next": the planner's next pulls when the report's goal is unmet ---
+
+
+def _report_id_of(folder: Path) -> str:
+    return re.search(r"IDT-[0-9A-F]{12}", (folder / "report.html").read_text()).group(0)
+
+
+def _section(page: str, name: str) -> str:
+    return page.split(f"<h2>{name}</h2>")[1].split("<h2>")[0]
+
+
+def test_an_unmet_goal_gives_what_to_measure_next(fitted):
+    """Four traces leave Kt's relative sd far above the default goal's 0.05: after the
+    answer, the section says the goal and its values, ranks the pulls, shows the plan's
+    figure (figures/plan.png), links plan.csv beside the report, which the conditions
+    reader of 'idtool import --conditions' reads back, and prints the 'idtool plan'
+    command that reproduces it."""
+    import pandas as pd
+
+    from idtool._data._import_conditions import ConditionSources, conditions_for
+
+    page = (fitted / "report.html").read_text()
+    assert page.index("<h2>Answer</h2>") < page.index("<h2>What to measure next</h2>")
+    assert page.index("<h2>What to measure next</h2>") < page.index("<h2>Dataset</h2>")
+    section = _section(page, "What to measure next")
+    sentence = html.unescape(section.split("<p>")[1].split("</p>")[0])
+    assert sentence.startswith("Goal: every physical parameter (Kt, mu, ")
+    assert "relative sd of at most 0.05. Now the largest relative sd is " in sentence
+    assert "after the 10 planned pulls below it is expected at " in sentence
+    assert "a uniform grid of 10 pulls: " in sentence
+    assert "reach the target" in sentence or "not reached within 10 pulls" in sentence
+    assert section.count("<tr>") == 1 + 10  # the header and the ranked pulls
+    assert 'alt="the planned pulls and the goal against the number of pulls"' in section
+    assert (fitted / "figures" / "plan.png").is_file()
+    assert '<a href="plan.csv">plan.csv</a>' in section
+    command = html.unescape(section.split("<pre>")[1].split("</pre>")[0])
+    assert command == (
+        f"idtool plan {fitted} --goal parameters --rel 0.05 --pulls 10 --out plans/r"
+    )
+    table = pd.read_csv(fitted / "plan.csv")
+    assert len(table) == 10
+    sources = ConditionSources(table=fitted / "plan.csv")
+    found, problems = conditions_for(list(table["file"]), sources)
+    assert found is not None, problems
+    assert [c.normal_load_n for c in found] == pytest.approx(list(table["load [N]"]))
+    assert "Goal met" not in page
+    assert "## What to measure next" in (fitted / "report.md").read_text()
+
+
+def test_a_met_goal_and_no_plan_leave_the_section_out(fitted, tmp_path, capsys):
+    """A goal the fit meets is one line under the answer, no section, no plan.csv (an
+    older one removed); --no-plan leaves the check out too; the goal's options enter the
+    report id; they are checked before the fit is read."""
+    folder = tmp_path / "r"
+    shutil.copytree(fitted, folder)
+    default = _report_id_of(folder)
+    assert main(["report", str(folder), "--rel", "0.9"]) == 0
+    page = (folder / "report.html").read_text()
+    assert "<h2>What to measure next</h2>" not in page
+    assert "Goal met: every physical parameter (Kt, mu, " in _answer(page)
+    assert "relative sd of at most 0.9" in _answer(page)
+    assert not (folder / "plan.csv").exists()
+    met = _report_id_of(folder)
+    assert met != default
+    assert main(["report", str(folder), "--no-plan"]) == 0
+    page = (folder / "report.html").read_text()
+    assert "What to measure next" not in page and "Goal met" not in page
+    assert _report_id_of(folder) not in (default, met)
+    capsys.readouterr()
+    assert main(["report", str(folder), "--goal", "band"]) == 2
+    assert "--goal band needs --at LOAD,AMPLITUDE" in capsys.readouterr().err
+
+
+def test_a_goal_the_planner_cannot_plan_on_is_one_line(fitted, tmp_path, monkeypatch):
+    """The laws goal on a fit that kept one coupling law, or whatever the planner
+    raises: one line under the answer saying why, no section, no plan.csv; and each goal
+    its own report id."""
+    import idtool._report._html_plan as html_plan
+    from idtool._fit._store import load_artefact
+    from idtool._plan._options import GoalOptions
+    from idtool._report._html import _report_id
+
+    fit = load_artefact(fitted)
+    laws = html_plan.next_pulls(fit, fitted, None, GoalOptions("laws"), tmp_path)
+    assert laws.section is None and laws.csv is None
+    assert (
+        "What to measure next: not planned for this fit: --goal laws needs a fit that "
+        "kept several coupling laws" in laws.note
+    )
+
+    def broken(*args, **kwargs):
+        raise FloatingPointError("singular information matrix")
+
+    monkeypatch.setattr(html_plan, "goal_now", broken)
+    failed = html_plan.next_pulls(fit, fitted, None, GoalOptions(), tmp_path)
+    assert failed.section is None and failed.csv is None
+    assert (
+        "What to measure next: not planned: the planner failed (FloatingPointError: "
+        "singular information matrix)." in failed.note
+    )
+    assert not list(tmp_path.iterdir())  # no figure
+    ids = {
+        _report_id(fitted, (30.0, 50.0), (), goal)
+        for goal in (
+            None,
+            GoalOptions(),
+            GoalOptions(rel=0.1),
+            GoalOptions(n_pulls=5),
+            GoalOptions("laws"),
+            GoalOptions("band", at=((670.0, 0.7),)),
+            GoalOptions("band", at=((270.0, 0.7),)),
+        )
+    }
+    assert len(ids) == 7

@@ -7,8 +7,9 @@ import math
 
 from idtool._atomic import atomic_output_dir, refuse_existing
 from idtool._errors import IdtoolError
+from idtool._plan._options import GOAL_NAMES, GoalOptions
 
-__all__ = ["register"]
+__all__ = ["add_goal_arguments", "goal_options", "register"]
 
 
 def _range(option: str, text: str | None, hi_max: float = math.inf) -> tuple[float, float] | None:
@@ -62,20 +63,55 @@ def _grid(text: str) -> tuple[int, int]:
     return a, b
 
 
+def goal_options(args: argparse.Namespace) -> GoalOptions:
+    """The goal the options of :func:`add_goal_arguments` ask for, checked."""
+    return GoalOptions(
+        args.goal, args.pulls, tuple(_at(args.at) or ()), args.half_width, args.rel, args.weight
+    )
+
+
+def add_goal_arguments(p: argparse.ArgumentParser, default: str) -> None:
+    """The goal's options (``--goal``, ``--at``, ``--half-width``, ``--rel``,
+    ``--weight``, ``--pulls``): ``idtool plan``'s and ``idtool report``'s, one
+    definition; ``default``: the command's default goal."""
+    p.add_argument(
+        "--goal",
+        choices=GOAL_NAMES,
+        default=default,
+        help=f"band, laws or parameters (default {default})",
+    )
+    p.add_argument(
+        "--at",
+        action="append",
+        metavar="LOAD,AMPLITUDE",
+        help="band goal: operating point, e.g. 670,0.7 (repeatable)",
+    )
+    p.add_argument(
+        "--half-width",
+        type=float,
+        default=0.01,
+        help="band goal: target half-width of the 95%% FR band (default 0.01)",
+    )
+    p.add_argument(
+        "--rel", type=float, default=0.05, help="parameters goal: target relative sd (default 0.05)"
+    )
+    p.add_argument(
+        "--weight",
+        type=float,
+        default=0.95,
+        help="laws goal: target weight of the true law (default 0.95)",
+    )
+    p.add_argument("--pulls", type=int, default=10, help="pulls to plan (default 10)")
+
+
 def _run(args: argparse.Namespace) -> int:
     import numpy as np
 
     # the options are checked before the fit is read
     loads = _range("--loads", args.loads)
     amps = _range("--amplitudes", args.amplitudes, 1.0)
-    at = _at(args.at)
+    goal = goal_options(args)
     grid = _grid(args.grid)
-    if args.goal == "band" and at is None:
-        raise IdtoolError("--goal band needs --at LOAD,AMPLITUDE (e.g. --at 670,0.7)")
-    if args.pulls < 1:
-        raise IdtoolError(f"--pulls {args.pulls}: plan at least 1")
-    if not 0 < args.half_width < 1:
-        raise IdtoolError(f"--half-width {args.half_width:g}: give an FR half-width in (0, 1)")
     refuse_existing(args.out, args.force)
     import idtool
     from idtool._plan._linear import Points
@@ -83,13 +119,13 @@ def _run(args: argparse.Namespace) -> int:
 
     fit = idtool.load_fit(args.fit)
     plan = fit.plan(
-        args.goal,
-        args.pulls,
-        at=at,
-        half_width=args.half_width,
+        goal.goal,
+        goal.n_pulls,
+        at=goal.at or None,
+        half_width=goal.half_width,
         next_pull=args.next_pull,
-        rel=args.rel,
-        weight=args.weight,
+        rel=goal.rel,
+        weight=goal.weight,
         loads_n=loads,
         amplitudes=amps,
         speeds_m_s=args.speeds,
@@ -131,39 +167,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("fit", help="fit folder, e.g. fits/NAME")
     p.add_argument("--out", required=True, help="output folder, e.g. plans/NAME")
-    p.add_argument(
-        "--goal",
-        choices=("band", "laws", "parameters"),
-        default="band",
-        help="band (default), laws or parameters",
-    )
-    p.add_argument(
-        "--at",
-        action="append",
-        metavar="LOAD,AMPLITUDE",
-        help="band goal: operating point, e.g. 670,0.7 (repeatable)",
-    )
-    p.add_argument(
-        "--half-width",
-        type=float,
-        default=0.01,
-        help="band goal: target half-width of the 95%% FR band (default 0.01)",
-    )
+    add_goal_arguments(p, "band")
     p.add_argument(
         "--next-pull",
         action="store_true",
         help="band goal: the next pull's band (scatter added), not the mean FR's",
     )
-    p.add_argument(
-        "--rel", type=float, default=0.05, help="parameters goal: target relative sd (default 0.05)"
-    )
-    p.add_argument(
-        "--weight",
-        type=float,
-        default=0.95,
-        help="laws goal: target weight of the true law (default 0.95)",
-    )
-    p.add_argument("--pulls", type=int, default=10, help="pulls to plan (default 10)")
     p.add_argument("--loads", help="load limits LOW:HIGH [N] (default: the tested range)")
     p.add_argument("--amplitudes", help="amplitude limits LOW:HIGH (default: the tested range)")
     p.add_argument("--speeds", type=number_list, help="pull speeds [m/s] (default: the fit's)")

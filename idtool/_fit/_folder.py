@@ -25,6 +25,7 @@ __all__ = [
     "FIT_JSON",
     "FIT_SCHEMA_VERSION",
     "FIT_STATE",
+    "PLAN_CSV",
     "POSTERIOR_NC",
     "PPC_PNG",
     "REPORT_HTML",
@@ -193,6 +194,13 @@ REPORT_HTML = FolderFile(
 REPORT_MD = FolderFile(
     "report.md", "report", "the report as Markdown", "idtool._report._html:write_report"
 )
+PLAN_CSV = FolderFile(
+    "plan.csv",
+    "report",
+    "the report's next pulls when its goal is unmet: the conditions table",
+    "idtool._report._html:write_report",
+    "idtool._data._import_conditions:conditions_for",
+)
 
 FIT_FOLDER: tuple[FolderFile, ...] = (
     FIT_JSON,
@@ -209,6 +217,7 @@ FIT_FOLDER: tuple[FolderFile, ...] = (
     PPC_PNG,
     REPORT_HTML,
     REPORT_MD,
+    PLAN_CSV,
 )
 
 

@@ -12,6 +12,8 @@ from idtool._plotting import save_figure, subplots
 
 __all__ = ["plot_plan"]
 
+_UNITS = {"band": "FR", "parameters": "-", "laws": "-"}
+
 
 def plot_plan(plan, band_map: np.ndarray, traces: np.ndarray, path: Path) -> Path:
     """Write the figure of ``plan`` (:class:`~idtool._plan._plan.Plan`) to ``path``
@@ -26,7 +28,7 @@ def plot_plan(plan, band_map: np.ndarray, traces: np.ndarray, path: Path) -> Pat
     z = band_map.reshape(n_l, n_a, n_s)[:, :, 0]
     if n_l > 1 and n_a > 1:
         mesh = left.contourf(loads, amps, z.T, levels=12, cmap="viridis")
-        fig.colorbar(mesh, ax=left, label="today's FR band half-width (95%)")
+        fig.colorbar(mesh, ax=left, label="today's 95% FR band half-width [FR]")
     left.scatter(
         traces[:, 0], traces[:, 1], marker="x", color="k", s=40, label="fitted traces", zorder=3
     )
@@ -67,7 +69,7 @@ def plot_plan(plan, band_map: np.ndarray, traces: np.ndarray, path: Path) -> Pat
         loc="upper center",
         bbox_to_anchor=(0.5, -0.16),
         ncol=3,
-        fontsize=8,
+        fontsize=9,
         markerscale=0.6,
         frameon=False,
     )
@@ -80,8 +82,8 @@ def plot_plan(plan, band_map: np.ndarray, traces: np.ndarray, path: Path) -> Pat
         right.axhline(plan.target, color="k", linestyle=":", label=f"target {plan.target:g}")
     else:
         right.set_title(f"target {plan.target:g}: met before any pull", fontsize=9)
-    right.set_xlabel("pulls added")
-    right.set_ylabel(f"expected {plan.goal} goal: {plan.unit}")
+    right.set_xlabel("pulls added [count]")
+    right.set_ylabel(f"expected {plan.unit} [{_UNITS[plan.goal]}]")
     right.legend(fontsize=9)
     fig.suptitle(f"idtool plan: goal {plan.goal}")
     save_figure(fig, path)

@@ -71,10 +71,11 @@ def relative_sd(law: LinearLaw, var_z: np.ndarray) -> np.ndarray:
 def parameter_values(law: LinearLaw, after: bool) -> tuple[np.ndarray, np.ndarray]:
     """The parameters goal's value (the largest relative sd) now (1,) or after each
     candidate (c,), and every parameter's relative sd (1 or c, k)."""
-    # (1 + c, k), averaged over the sd draws
-    var = np.einsum("s,sck->ck", law.sd_weight, law.param_variance_after())
+    if after:  # (1 + c, k), averaged over the sd draws; now first
+        var = np.einsum("s,sck->ck", law.sd_weight, law.param_variance_after())[1:]
+    else:  # now alone: the candidates' updates are not needed
+        var = np.einsum("s,sk->k", law.sd_weight, law.param_variance())[None]
     rel = relative_sd(law, var)
-    rel = rel[1:] if after else rel[:1]
     return rel.max(axis=1), rel
 
 

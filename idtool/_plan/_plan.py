@@ -23,10 +23,19 @@ from idtool._errors import IdtoolError
 from idtool._fit._artefact import FitArtefact, LawFit
 from idtool._plan._goals import GOALS, law_values, parameter_values
 from idtool._plan._linear import LinearLaw, Points, linear_law
-from idtool._plan._select import greedy, uniform_batch, value_after
+from idtool._plan._options import meets_target
+from idtool._plan._select import goal_value, greedy, uniform_batch, value_after
 from idtool._predict._predict import Draws
 
-__all__ = ["Plan", "PlannedPull", "band_half_widths", "plan_pulls", "pull_file_name", "write_plan"]
+__all__ = [
+    "Plan",
+    "PlannedPull",
+    "band_half_widths",
+    "goal_now",
+    "plan_pulls",
+    "pull_file_name",
+    "write_plan",
+]
 
 N_SD_DRAWS = 32  # draws of the sds the linearised model averages over
 N_CHECK_DRAWS = 12  # parameter draws of the pseudo-Bayesian check
@@ -89,7 +98,7 @@ class Plan:
     @property
     def met(self) -> bool:
         """Whether the goal's value now already meets its target."""
-        return _meets(self.goal, self.values[0], self.target)
+        return meets_target(self.goal, self.values[0], self.target)
 
     def to_frame(self):
         """The conditions table (pandas): the columns ``idtool import --conditions``
@@ -116,10 +125,6 @@ def pull_file_name(p: PlannedPull) -> str:
         f"plan{p.rank:03d}_N{p.normal_load_n:.0f}_A{100 * p.amplitude_fraction:.0f}"
         f"_T{p.on_time_s:g}.csv"
     )
-
-
-def _meets(goal: str, value: float, target: float) -> bool:
-    return value >= target if goal == "laws" else value <= target
 
 
 def _limits(given: tuple[float, float] | None, seen: np.ndarray, name: str) -> tuple[float, float]:
@@ -150,6 +155,77 @@ def _laws(fit: FitArtefact, goal: str) -> list[tuple[str, float, LawFit]]:
         out += [(name, w, law) for name, (w, law) in fit.alternates.items()]
     total = sum(w for _, w, _ in out)
     return [(n, w / total, law) for n, w, law in out]
+
+
+def _checked_laws(fit: FitArtefact, goal: str) -> list[tuple[str, float, LawFit]]:
+    """:func:`_laws`, once the fit is checked to support ``goal``."""
+    if goal not in GOALS:
+        raise IdtoolError(f"goal {goal!r}: choose one of {', '.join(GOALS)}")
+    if fit.chosen.levels is None:
+        raise IdtoolError(
+            "the fit has no levels model (fitted with variability off, or its scatter and "
+            "discrepancy could not be estimated: see the fit's warnings)"
+        )
+    laws_used = _laws(fit, goal)
+    if goal == "laws" and len(laws_used) < 2:
+        raise IdtoolError(
+            "--goal laws needs a fit that kept several coupling laws: fit with "
+            "--coupling auto (the fit kept one)"
+        )
+    return laws_used
+
+
+def _targets(
+    fit: FitArtefact, goal: str, at: Sequence[tuple[float, float]] | None, unused: Points
+) -> Points:
+    """The band goal's target operating points (at the fit's median speed); ``unused``
+    for the other goals (it keeps the shapes)."""
+    if goal != "band":
+        return unused
+    if not at:
+        raise IdtoolError("--goal band needs --at LOAD,AMPLITUDE (e.g. --at 670,0.7)")
+    speed0 = float(np.median(np.asarray(fit.chosen.model.data.pull_speed_m_s)))
+    return Points(
+        np.array([float(n) for n, _ in at]),
+        np.array([float(a) for _, a in at]),
+        np.full(len(at), speed0),
+    )
+
+
+def goal_now(
+    fit: FitArtefact,
+    goal: str = "parameters",
+    *,
+    at: Sequence[tuple[float, float]] | None = None,
+    next_pull: bool = False,
+    seed: int = 0,
+) -> float:
+    """The goal's value today (:func:`plan_pulls`' ``values[0]``, the same sd draws and
+    model) without planning: the linearised model with one candidate pull instead of the
+    grid, and no greedy selection. What the report checks before it plans."""
+    laws_used = _checked_laws(fit, goal)
+    d = fit.chosen.model.data
+    one = Points(
+        np.asarray(d.normal_load_n, float)[:1],
+        np.asarray(d.amplitude_fraction, float)[:1],
+        np.asarray(d.pull_speed_m_s, float)[:1],
+    )
+    targets = _targets(fit, goal, at, one)
+    n_sd = 1 if goal == "laws" else N_SD_DRAWS
+    linear = [
+        linear_law(
+            name,
+            w,
+            law,
+            one,
+            targets,
+            n_sd,
+            seed,
+            sds=_estimated_sds(law) if goal == "laws" else None,
+        )
+        for name, w, law in laws_used
+    ]
+    return goal_value(goal, linear, next_pull, [])
 
 
 def plan_pulls(
@@ -184,15 +260,10 @@ def plan_pulls(
             fit's); ``grid``: levels of load and of amplitude.
         on_time_s: the pulls' ON time [s] (default: the measured traces' most common).
     """
-    if goal not in GOALS:
-        raise IdtoolError(f"goal {goal!r}: choose one of {', '.join(GOALS)}")
     if n_pulls < 1:
         raise IdtoolError(f"{n_pulls} pulls: plan at least 1")
+    laws_used = _checked_laws(fit, goal)
     chosen = fit.chosen
-    if chosen.levels is None:
-        raise IdtoolError(
-            "the fit has no levels model (fitted with variability off): fit again with it on"
-        )
     data = chosen.model.data
     lo_n, hi_n = _limits(loads_n, np.asarray(data.normal_load_n), "--loads")
     lo_a, hi_a = _limits(amplitudes, np.asarray(data.amplitude_fraction), "--amplitudes")
@@ -207,23 +278,7 @@ def plan_pulls(
     amps = np.linspace(lo_a, hi_a, n_a)
     mesh = np.array([(n, a, s) for n in loads for a in amps for s in speeds], float)
     cands = Points(mesh[:, 0], mesh[:, 1], mesh[:, 2])
-    if goal == "band":
-        if not at:
-            raise IdtoolError("--goal band needs --at LOAD,AMPLITUDE (e.g. --at 670,0.7)")
-        speed0 = float(np.median(np.asarray(data.pull_speed_m_s)))
-        targets = Points(
-            np.array([float(n) for n, _ in at]),
-            np.array([float(a) for _, a in at]),
-            np.full(len(at), speed0),
-        )
-    else:
-        targets = Points(loads[:1], amps[:1], speeds[:1])  # unused; keeps the shapes
-    laws_used = _laws(fit, goal)
-    if goal == "laws" and len(laws_used) < 2:
-        raise IdtoolError(
-            "--goal laws needs a fit that kept several coupling laws: fit with "
-            "--coupling auto (the fit kept one)"
-        )
+    targets = _targets(fit, goal, at, Points(loads[:1], amps[:1], speeds[:1]))
     on_s = _on_time(chosen, on_time_s)
     n_sd = 1 if goal == "laws" else N_SD_DRAWS
     linear = [
@@ -245,7 +300,7 @@ def plan_pulls(
     for n in range(1, n_pulls + 1):
         uniform.append(value_after(goal, linear, _uniform(n, n_l, n_a, speeds.size), next_pull)[-1])
     target = {"band": half_width, "parameters": rel, "laws": weight}[goal]
-    reach = next((i for i, v in enumerate(values) if _meets(goal, v, target)), None)
+    reach = next((i for i, v in enumerate(values) if meets_target(goal, v, target)), None)
     pulls = tuple(
         PlannedPull(
             i + 1, float(mesh[c, 0]), float(mesh[c, 1]), float(mesh[c, 2]), on_s, values[i + 1]

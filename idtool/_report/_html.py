@@ -22,10 +22,19 @@ from idtool._atomic import atomic_output_dir, write_text_atomic
 from idtool._diagnostic import BANNER_CODES, banner_label, from_records, with_code
 from idtool._errors import IdtoolError
 from idtool._fit._artefact import FitArtefact
-from idtool._fit._folder import FIT_JSON, PPC_PNG, REPORT_HTML, REPORT_MD, RESIDUALS_PNG, TRACES_PNG
+from idtool._fit._folder import (
+    FIT_JSON,
+    PLAN_CSV,
+    PPC_PNG,
+    REPORT_HTML,
+    REPORT_MD,
+    RESIDUALS_PNG,
+    TRACES_PNG,
+)
 from idtool._fit._result import interval_statement
 from idtool._fit._store import load_artefact
 from idtool._fit._summary import VariabilitySummary
+from idtool._plan._options import GoalOptions
 from idtool._posterior._diagnostics import STOP_REASONS, import_arviz
 from idtool._posterior._draws import fit_draws, stored_posterior
 from idtool._posterior._store import POSTERIOR_FILE
@@ -37,6 +46,7 @@ from idtool._report._figures import (
     friction_ratio_figures,
     walker_figure,
 )
+from idtool._report._html_plan import NEXT_PULLS, NextPulls, next_pulls
 from idtool._report._html_validation import validation_banner, validation_section
 from idtool._report._page import (
     G,
@@ -222,19 +232,38 @@ def _choice_table(title: str, what: str, entries: Mapping[str, Mapping[str, Any]
     )
 
 
-def _report_id(folder: Path, targets: Sequence[float], loads_n: Sequence[float]) -> str:
+def _report_id(
+    folder: Path,
+    targets: Sequence[float],
+    loads_n: Sequence[float],
+    goal: GoalOptions | None,
+) -> str:
     parts = [(folder / FIT_JSON.name).read_bytes()]
     if (folder / POSTERIOR_FILE).is_file():
         parts.append((folder / POSTERIOR_FILE).read_bytes())
-    return report_id(*parts, options_bytes(targets=list(targets), loads_n=list(loads_n)))
+    options = options_bytes(
+        targets=list(targets),
+        loads_n=list(loads_n),
+        plan=None if goal is None else goal.as_dict(),
+    )
+    return report_id(*parts, options)
 
 
 def write_report(
     fit_folder: str | Path,
     targets: Sequence[float] | None = None,
     loads_n: Sequence[float] = (),
+    *,
+    goal: str = "parameters",
+    n_pulls: int = 10,
+    at: Sequence[tuple[float, float]] | None = None,
+    half_width: float = 0.01,
+    rel: float = 0.05,
+    weight: float = 0.95,
+    plan: bool = True,
 ) -> Path:
-    """Write ``report.html``, ``report.md`` and ``figures/*.png`` into ``fit_folder``.
+    """Write ``report.html``, ``report.md`` and ``figures/*.png`` into ``fit_folder``,
+    and ``plan.csv`` when the goal is unmet.
 
     Args:
         fit_folder: a folder written by ``idtool fit`` (or :meth:`idtool.Fit.save`).
@@ -242,6 +271,18 @@ def write_report(
             (default :data:`TARGETS`).
         loads_n: loads [N] at which to give it, besides the tested ones (those beyond
             the tested range are flagged as extrapolation).
+        goal: the planning goal whose next pulls the section "What to measure next"
+            gives while the fit does not meet it (:meth:`idtool.Fit.plan`'s, with its
+            options below; default: every physical parameter to a relative sd of
+            0.05), with ``plan.csv`` beside the report (the conditions table ``idtool
+            import --conditions`` reads) and ``figures/plan.png``. A met goal is one
+            line under the answer.
+        n_pulls: the pulls to plan.
+        at: the band goal's operating points, (load [N], amplitude fraction) pairs.
+        half_width: the band goal's target half-width [FR].
+        rel: the parameters goal's target relative sd.
+        weight: the laws goal's target weight of the true law.
+        plan: False leaves the section (and the goal's check) out.
 
     An answer that extrapolates beyond the tested loads or amplitudes is a red banner
     when it answers what was asked (``targets`` or ``loads_n`` given); for the default
@@ -256,6 +297,18 @@ def write_report(
     for load in loads_n:
         if not load > 0.0:
             raise IdtoolError(f"loads_n: {load:g} N is not a positive load")
+    goal_options = (
+        GoalOptions(
+            goal,
+            n_pulls,
+            tuple((float(n), float(a)) for n, a in at or ()),
+            half_width,
+            rel,
+            weight,
+        )
+        if plan
+        else None
+    )
 
     folder = Path(fit_folder)
     fit = load_artefact(folder)
@@ -263,10 +316,11 @@ def write_report(
     post, meta = _posterior(folder)
     # 400 draws put the 2.5% and 97.5% points within about 1% of their limits while
     # keeping the inverse (bisection per draw) quick.
-    draws = fit_draws(fit, stored_posterior(folder), max_draws=400)
+    stored = stored_posterior(folder)
+    draws = fit_draws(fit, stored, max_draws=400)
     names = list(fit.model.physical_names)
     speed = float(np.median(fit.model.data.pull_speed_m_s))
-    rid = _report_id(folder, targets, loads_n)
+    rid = _report_id(folder, targets, loads_n, goal_options)
     first = answer(fit, draws, targets, loads_n)
     unasked = "" if asked or not first.extrapolation else _unasked_note(first.extrapolation)
     sec: dict[str, str] = {"Answer": f'<div class="answer">{first.html}{unasked}</div>'}
@@ -274,6 +328,13 @@ def write_report(
     md += [*first.markdown, ""]
 
     with atomic_output_dir(folder / "figures", force=True) as figs:
+        nxt = NextPulls()
+        if goal_options is not None:
+            nxt = next_pulls(fit, folder, stored, goal_options, figs)
+        sec["Answer"] = sec["Answer"].removesuffix("</div>") + nxt.note + "</div>"
+        if nxt.section is not None:
+            sec[NEXT_PULLS] = nxt.section
+        md += [*nxt.markdown, ""]
         ds = fit.dataset
         sec["Dataset"] = (
             f"<p>{html.escape(ds.name)}: {len(ds.traces)} traces; "
@@ -428,7 +489,12 @@ def write_report(
     title = f"idtool report: {fit.dataset.name}"
     extrapolation = first.extrapolation if asked else []
     banners = _banners(fit, meta, extrapolation) + validation_banner(folder)
-    document = page(title, _header(fit, meta, rid), banners, {n: sec[n] for n in SECTIONS})
+    order = (SECTIONS[0], NEXT_PULLS, *SECTIONS[1:])
+    document = page(title, _header(fit, meta, rid), banners, {n: sec[n] for n in order if n in sec})
+    if nxt.csv is not None:
+        write_text_atomic(folder / PLAN_CSV.name, nxt.csv)
+    else:  # an older report's plan is no longer this report's
+        (folder / PLAN_CSV.name).unlink(missing_ok=True)
     out = write_text_atomic(folder / REPORT_HTML.name, document)
     write_text_atomic(folder / REPORT_MD.name, "\n".join(md) + "\n")
     return out

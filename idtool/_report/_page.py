@@ -30,6 +30,7 @@ table{border-collapse:collapse;font-size:0.9em;margin:0.4em 0}
 td,th{border:1px solid #bbb;padding:2px 6px;text-align:left;vertical-align:top}
 th{background:#eee}td.num{text-align:right;font-variant-numeric:tabular-nums}
 img{max-width:100%;display:block;margin:0.5em 0}
+pre{white-space:pre-wrap;overflow-wrap:anywhere;background:#f6f6f6;padding:0.3em 0.5em}
 .banner{border:2px solid #b00000;background:#fff0f0;padding:0.4em 1em;margin:0.6em 0;
 font-weight:bold}
 .meta td:first-child{font-weight:bold;white-space:nowrap}
