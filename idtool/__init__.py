@@ -142,6 +142,8 @@ _LAZY = {
     "fit_levels": "idtool._levels._api",
     "LevelsFit": "idtool._levels._result",
     "LevelsPrediction": "idtool._levels._result",
+    "LevelsPosterior": "idtool._levels._sample",
+    "load_levels_fit": "idtool._levels._store",
 }
 
 # The one list of public names: __all__ is read from it, and the TYPE_CHECKING block
@@ -227,6 +229,12 @@ if TYPE_CHECKING:
     from idtool._levels._result import (
         LevelsFit as LevelsFit,
         LevelsPrediction as LevelsPrediction,
+    )
+    from idtool._levels._sample import (
+        LevelsPosterior as LevelsPosterior,
+    )
+    from idtool._levels._store import (
+        load_levels_fit as load_levels_fit,
     )
     from idtool._model._actuator import (
         AbstractActuator as AbstractActuator,

@@ -38,9 +38,13 @@ def _run(args: argparse.Namespace) -> int:
             raise IdtoolError(f"--targets {t:g}: give reductions [%] in (0, 100)")
     if args.draws < 10:
         raise IdtoolError(f"--draws {args.draws}: give at least 10")
+    from idtool._levels._store import is_levels_fit, not_for_tables
+
     for folder in args.fits:
         if not (Path(folder) / FIT_JSON.name).is_file():
             raise IdtoolError(f"{folder}: not a fit folder (no fit.json); run 'idtool fit' first")
+        if is_levels_fit(folder):
+            raise not_for_tables(folder, "idtool compare")
     out = Path(args.out) if args.out else default_out(args.fits)
     refuse_existing(out, args.force)
 

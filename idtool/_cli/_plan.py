@@ -107,6 +107,10 @@ def add_goal_arguments(p: argparse.ArgumentParser, default: str) -> None:
 def _run(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from idtool._levels._store import is_levels_fit, not_for_tables
+
+    if is_levels_fit(args.fit):  # first: no option of the planner applies to a table
+        raise not_for_tables(args.fit, "idtool plan")
     # the options are checked before the fit is read
     loads = _range("--loads", args.loads)
     amps = _range("--amplitudes", args.amplitudes, 1.0)

@@ -20,11 +20,14 @@ __all__ = ["register"]
 def _run(args: argparse.Namespace) -> int:
     load_numerics()  # first: the collector then skips what it imports
     # local, as in every command: JAX and the figures load only when a command needs them
+    from idtool._levels._store import is_levels_fit
     from idtool._posterior._sample import CHAIN_FILE
     from idtool._report._sample_text import POSTERIOR_FILES
 
     started = time.perf_counter()
     folder = Path(args.fit)
+    if is_levels_fit(folder):
+        return _run_levels(args, folder, started)
     fit = idtool.load_fit(folder)
     chain = folder / CHAIN_FILE
     if chain.exists() and not (args.resume or args.force):
@@ -76,6 +79,58 @@ def _run(args: argparse.Namespace) -> int:
             f"idtool sample: the chain did NOT converge (about {diagnostics.steps_needed} "
             f"more steps needed): its outputs are written, but continue it with {how} "
             "before using them",
+            file=sys.stderr,
+        )
+        return EXIT_NOT_CONVERGED
+    return 0
+
+
+def _run_levels(args: argparse.Namespace, folder: Path, started: float) -> int:
+    """A friction table's fit (kind: levels): its own likelihood, through the same
+    sampler (:meth:`idtool.LevelsFit.sample`)."""
+    from idtool._levels._result import CHAIN_H5, POSTERIOR_FILES
+
+    if args.noise is not None:
+        raise IdtoolError(
+            f"{folder} is the fit of a friction table (kind: levels): --noise applies to "
+            "traces only (a table is sampled on its own likelihood); leave it out"
+        )
+    fit = idtool.load_levels_fit(folder)
+    chain = folder / CHAIN_H5
+    if chain.exists() and not (args.resume or args.force):
+        raise IdtoolError(f"{chain} exists: pass --resume to continue it or --force to start over")
+    if args.checkpoint_s < 0:
+        raise IdtoolError(f"--checkpoint-s {args.checkpoint_s:g}: give a number >= 0")
+    if args.resume and not chain.exists():
+        print(f"idtool sample: no {chain} to resume; starting a new chain")
+    if args.force and not args.resume:
+        for name in POSTERIOR_FILES:  # a new chain: no output of the old one may survive
+            (folder / name).unlink(missing_ok=True)
+    try:
+        post = fit.sample(
+            walkers=args.walkers, steps=args.steps, seed=args.seed, priors=args.priors,
+            chain_path=chain, resume=args.resume, progress=not (args.no_progress or args.quiet),
+            checkpoint_s=args.checkpoint_s, max_steps=args.max_steps,
+            max_minutes=args.max_minutes,
+        )  # fmt: skip
+    except KeyboardInterrupt:
+        saved = f"the steps done so far are in {chain}" if chain.exists() else "nothing saved"
+        print(f"idtool sample: interrupted; {saved}; continue with --resume", flush=True)
+        return EXIT_INTERRUPTED
+    report = fit.save_posterior(folder, command=args.argv)
+    if args.json:
+        print((folder / SAMPLE_JSON.name).read_text())
+    else:
+        print(report)
+        print(
+            f"wrote {folder}/ ({', '.join(POSTERIOR_FILES)}) in "
+            f"{time.perf_counter() - started:.1f} s"
+        )
+    if not post.converged:
+        d = post.diagnostics
+        print(
+            f"idtool sample: the chain did NOT converge (about {d['steps_needed']} more steps "
+            "needed): its outputs are written, but continue it with --resume before using them",
             file=sys.stderr,
         )
         return EXIT_NOT_CONVERGED

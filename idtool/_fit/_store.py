@@ -65,6 +65,12 @@ def load_artefact(folder: str | Path) -> FitArtefact:
     folder = Path(folder)
     doc = read_fit_doc(folder)
     doc_path = folder / FIT_JSON.name
+    if isinstance(doc, dict) and doc.get("kind") == "levels":
+        raise IdtoolError(
+            f"{folder} is the fit of a friction table (kind: levels), not of bench traces: "
+            "read it with idtool.load_levels_fit; compare, plan, validate and the trace "
+            "fit's API do not apply to it (yet)"
+        )
     try:
         ds_info = doc["dataset"]
         noise = doc["noise"]

@@ -11,17 +11,27 @@ from typing import Any
 
 import numpy as np
 
-from idtool._atomic import atomic_output_dir
+from idtool._atomic import atomic_file, atomic_output_dir, write_text_atomic
+from idtool._errors import IdtoolError
 from idtool._fit._result import Estimate
 from idtool._lawfit._profile import Side
 from idtool._levels._estimate import SD_NAMES, Optimum
 from idtool._levels._model import LevelsModel
+from idtool._levels._sample import LevelsPosterior, sample_table
+from idtool._posterior._record import PosteriorRecord
+from idtool._posterior._runner import MAX_MINUTES, MAX_STEPS
+from idtool._posterior._store import write_posterior
 from idtool._version import __version__
 
 __all__ = ["SCHEMA_VERSION", "LevelsFit", "LevelsPrediction"]
 
 SCHEMA_VERSION = "1"
 FIT_JSON, REPORT_TXT, FIGURE = "fit.json", "report.txt", "fr_vs_speed.png"
+CHAIN_H5, POSTERIOR_NC, SAMPLE_JSON, REPORT_SAMPLE_TXT = (
+    "chain.h5", "posterior.nc", "sample.json", "report_sample.txt",
+)  # fmt: skip
+# what 'idtool sample' writes into a table fit's folder (the figure redrawn)
+POSTERIOR_FILES = (CHAIN_H5, POSTERIOR_NC, SAMPLE_JSON, REPORT_SAMPLE_TXT)
 # A prediction moved by more than this (relative FR) along a direction of the
 # parameters the table does not inform is not bounded by the data.
 UNPINNED_FR = 0.01
@@ -70,6 +80,11 @@ class LevelsPrediction:
         return out
 
 
+def _num(x: float) -> float | str:
+    """A float for JSON: an infinite side as "inf" or "-inf"."""
+    return float(x) if math.isfinite(x) else ("inf" if x > 0 else "-inf")
+
+
 @dataclasses.dataclass(frozen=True)
 class LevelsFit:
     """Kt, mu and the coupling fitted to a steady-state friction table
@@ -85,6 +100,8 @@ class LevelsFit:
         notes: facts of the design (no repeats: scatter and discrepancy summed).
         seconds: wall time of the fit [s].
         seed: of the multi-start.
+        posterior: the posterior once sampled (:meth:`sample`) or read back with the
+            fit (:func:`idtool.load_levels_fit`); its draws then give the predictions.
     """
 
     model: LevelsModel
@@ -96,6 +113,7 @@ class LevelsFit:
     notes: tuple[str, ...]
     seconds: float
     seed: int = 0
+    posterior: LevelsPosterior | None = dataclasses.field(default=None, compare=False)
 
     @property
     def table(self):
@@ -134,6 +152,8 @@ class LevelsFit:
             *(np.asarray(x, float) for x in (load_n, amplitude_m, speed_m_s, f))
         )
         alpha = a / t.reference_amplitude_m
+        if self.posterior is not None:
+            return self._predict_posterior(n, a, v, f)
         import jax
 
         theta = self.optimum.theta
@@ -164,6 +184,114 @@ class LevelsFit:
             return np.where(pinned, lo, np.nan), np.where(pinned, hi, np.nan)
 
         return LevelsPrediction(n, a, v, f, fr, band(mean_sd), band(next_sd), pinned)
+
+    def _predict_posterior(self, n, a, v, f, seed: int = 0) -> LevelsPrediction:
+        """FR from the posterior's draws: the median of the model's FR, the mean band
+        with each draw's discrepancy, the next measurement's with its scatter too
+        (2.5 and 97.5 percentiles; normal draws seeded by ``seed``)."""
+        import jax
+
+        assert self.posterior is not None
+        theta, sds = self.posterior.thetas(self.model)
+        alpha = a / self.table.reference_amplitude_m
+        fr_d = np.asarray(
+            jax.vmap(lambda th: self.model.fr_at(th, n.ravel(), alpha.ravel(), v.ravel(),
+                                                 f.ravel()))(theta)
+        )  # fmt: skip
+        rng = np.random.default_rng(seed)
+        mean = fr_d * np.exp(sds["discrepancy_fr"][:, None] * rng.standard_normal(fr_d.shape))
+        nxt = mean * np.exp(sds["scatter_fr"][:, None] * rng.standard_normal(fr_d.shape))
+
+        def band(x):
+            lo, hi = np.percentile(x, [2.5, 97.5], axis=0)
+            return lo.reshape(n.shape), hi.reshape(n.shape)
+
+        fr = np.median(fr_d, axis=0).reshape(n.shape)
+        return LevelsPrediction(n, a, v, f, fr, band(mean), band(nxt), np.ones(n.shape, bool))
+
+    # ---------------------------------------------------------------- posterior
+    def sample(
+        self,
+        walkers: int | None = None,
+        steps: int | None = None,
+        seed: int | None = None,
+        priors=None,
+        chain_path: str | Path | None = None,
+        resume: bool = False,
+        progress: bool = False,
+        checkpoint_s: float = 20.0,
+        max_steps: int = MAX_STEPS,
+        max_minutes: float = MAX_MINUTES,
+    ) -> LevelsPosterior:
+        """Sample the posterior of the table's likelihood (the one the fit maximises)
+        with emcee, by default until converged (:mod:`idtool._levels._sample`; the
+        arguments as :meth:`idtool.Fit.sample`'s). The fit keeps it as
+        :attr:`posterior`: its predictions (and the speed figure) then come from the
+        draws. Returns it."""
+        record = sample_table(
+            self.model, self.optimum, self.sides, walkers=walkers, steps=steps, seed=seed,
+            priors=priors, chain_path=chain_path, resume=resume, progress=progress,
+            checkpoint_s=checkpoint_s, max_steps=max_steps, max_minutes=max_minutes,
+        )  # fmt: skip
+        post = LevelsPosterior.of(record)
+        object.__setattr__(self, "posterior", post)  # the fit's own, as Fit.sample's
+        return post
+
+    def sample_report(self) -> str:
+        """The posterior's text report: the estimates against the posterior intervals,
+        and the chain's diagnostics."""
+        post = self.posterior
+        if post is None:
+            raise IdtoolError("no posterior: sample first (idtool sample FITDIR)")
+        lines = [
+            f"idtool {__version__}: posterior of the table fit {self.table.name} "
+            f"({post.describe()}, {post.n_draws} draws kept)",
+            "",
+            "[[Posterior]] median and 95% interval (fit: estimate and its interval)",
+        ]
+        summary = post.summary()
+        for name, s in summary.items():
+            lo, hi = s["ci95"]
+            e = self.estimates.get(name)
+            fit_text = f"   fit {e.estimate:.4g} {e.statement}" if e is not None else ""
+            lines.append(f"  {name:15s} {s['median']:<11.4g} [{lo:.4g}, {hi:.4g}]{fit_text}")
+        record = post.record
+        if record is not None:
+            lines += ["", "[[Convergence]]", record.diagnostics.report()]
+        else:
+            d = post.diagnostics
+            lines += ["", "[[Convergence]]", f"    {post.describe()}; {d.get('rule', '')}"]
+        return "\n".join(lines)
+
+    def save_posterior(self, out: str | Path, command: list[str] | None = None) -> str:
+        """Write the posterior into the fit's folder ``out``: ``posterior.nc`` (ArviZ
+        InferenceData), ``sample.json`` (summary, diagnostics, timing),
+        ``report_sample.txt`` and, when the table spans speeds, ``fr_vs_speed.png``
+        redrawn with the posterior's bands; each file atomically. Returns the report."""
+        post = self.posterior
+        if post is None or post.record is None:
+            raise IdtoolError("no posterior sampled in this session: sample first")
+        out = Path(out)
+        record: PosteriorRecord = post.record
+        extra = {"kind": "levels", "fit_seed": self.seed, "command": command}
+        write_posterior(record, out / POSTERIOR_NC, extra=extra)
+        report = self.sample_report()
+        doc = {
+            "kind": "levels",
+            "idtool_version": __version__,
+            "summary": post.summary(),
+            "diagnostics": post.diagnostics,
+            "timing": post.timing,
+            "seed": post.seed,
+            "priors": {n: p.to_dict() for n, p in record.priors.items()},
+            "command": command,
+        }
+        write_text_atomic(out / SAMPLE_JSON, json.dumps(doc, indent=1) + "\n")
+        write_text_atomic(out / REPORT_SAMPLE_TXT, report + "\n")
+        if self.spans_speeds:
+            with atomic_file(out / FIGURE) as tmp:
+                self.plot_speed(tmp)
+        return report
 
     # ------------------------------------------------------------------ outputs
     def report(self) -> str:
@@ -233,7 +361,7 @@ class LevelsFit:
                 "name": t.name,
                 "material": t.material,
                 "source": t.source,
-                "path": None if t.path is None else str(t.path),
+                "path": None if t.path is None else str(Path(t.path).resolve()),
                 "sha256": t.sha256,
                 "friction": t.friction,
                 "n_rows": t.n_rows,
@@ -255,6 +383,17 @@ class LevelsFit:
             "seconds": self.seconds,
             "seed": self.seed,
             "command": command,
+            # what idtool.load_levels_fit rebuilds the fit from (internal scale)
+            "state": {
+                "sides": {
+                    name: [[_num(s.z), _num(s.wald_rise), s.method] for s in self.sides[name]]
+                    for name in self.estimates
+                },
+                "ends": {name: self.ends[name].tolist() for name in self.estimates},
+                "null": o.null.tolist(),
+                "active": list(o.active),
+                "restricted": o.restricted,
+            },
         }
 
     @property
@@ -316,13 +455,14 @@ class LevelsFit:
             ax.legend(fontsize=8, title="normal load", title_fontsize=8)
         axes[0][0].set_ylabel("friction ratio ON / OFF [-]")
         axes[0][0].set_ylim(0.0, 1.1)
+        bands = "posterior 95% bands" if self.posterior is not None else "95% bands"
         fig.suptitle(
-            f"{t.name}: model ({self.model.law}, {self.model.coupling}), 95% bands", fontsize=10
+            f"{t.name}: model ({self.model.law}, {self.model.coupling}), {bands}", fontsize=10
         )
         fig.text(
             0.01, 0.01, "dark band: FR at a new condition; light: next measurement", fontsize=7
         )
         fig.tight_layout()
-        fig.savefig(path)
+        fig.savefig(path, format="png")
         plt.close(fig)
         return Path(path)

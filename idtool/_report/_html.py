@@ -34,6 +34,7 @@ from idtool._fit._folder import (
 from idtool._fit._result import interval_statement
 from idtool._fit._store import load_artefact
 from idtool._fit._summary import VariabilitySummary
+from idtool._levels._store import is_levels_fit
 from idtool._plan._options import GoalOptions
 from idtool._posterior._diagnostics import STOP_REASONS, import_arviz
 from idtool._posterior._draws import fit_draws, stored_posterior
@@ -46,6 +47,7 @@ from idtool._report._figures import (
     friction_ratio_figures,
     walker_figure,
 )
+from idtool._report._html_levels import write_levels_report
 from idtool._report._html_plan import NEXT_PULLS, NextPulls, next_pulls
 from idtool._report._html_validation import validation_banner, validation_section
 from idtool._report._page import (
@@ -311,6 +313,8 @@ def write_report(
     )
 
     folder = Path(fit_folder)
+    if is_levels_fit(folder):  # a friction table's fit: its own page (no answer options)
+        return write_levels_report(folder)
     fit = load_artefact(folder)
     summary, prov = fit.summary, fit.summary.provenance
     post, meta = _posterior(folder)

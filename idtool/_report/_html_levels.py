@@ -1,0 +1,213 @@
+"""``report.html`` of a friction table's fit (kind: levels): the page builder of
+:mod:`idtool._report._page` on what ``idtool fit`` and ``idtool sample`` left in the
+folder: the predictions with their bands first (the posterior's once sampled, else the
+fit's Wald bands), the fit's warnings as banners, then the estimates (fit and posterior
+intervals), the table against the fit, the FR-against-speed figure when the table spans
+speeds, the chain's convergence, provenance and sign-off."""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+import numpy as np
+
+from idtool._atomic import atomic_output_dir, write_text_atomic
+from idtool._levels._estimate import SD_NAMES
+from idtool._levels._result import FIGURE, FIT_JSON, POSTERIOR_NC, LevelsFit
+from idtool._levels._store import load_levels_fit
+from idtool._report._page import g, img, kv_table, now_utc, page, report_id, signoff, table
+from idtool._version import __version__
+
+__all__ = ["write_levels_report"]
+
+REPORT_HTML, REPORT_MD = "report.html", "report.md"
+NO_PLAN = (
+    "The planner (idtool plan) works on fits of bench traces; it does not plan the next "
+    "rows of a friction table."
+)
+
+
+def _bands(fit: LevelsFit) -> tuple[str, list[str]]:
+    """FR at each of the table's conditions with its bands: HTML and markdown."""
+    t = fit.table
+    _, first = t.operating_points
+    p = fit.predict(
+        t.normal_load_n[first], t.sliding_speed_m_s[first], amplitude_m=t.amplitude_m[first],
+        frequency_hz=t.vibration_frequency_hz[first],
+    )  # fmt: skip
+    rows, md = [], ["| load N | amplitude um | speed mm/s | FR | 95% new condition | 95% next |"]
+    md.append("|---|---|---|---|---|---|")
+    for i in range(first.size):
+        mean = f"[{g(p.mean_band[0][i])}, {g(p.mean_band[1][i])}]" if p.pinned[i] else "not pinned"
+        nxt = f"[{g(p.next_band[0][i])}, {g(p.next_band[1][i])}]" if p.pinned[i] else "not pinned"
+        row = [
+            g(p.load_n[i]), g(p.amplitude_m[i] * 1e6), g(p.speed_m_s[i] * 1e3),
+            g(p.frequency_hz[i] / 1e3), g(p.fr[i]), mean, nxt,
+            f"{100 * (1 - p.fr[i]):.1f}%",
+        ]  # fmt: skip
+        rows.append(row)
+        md.append(f"| {row[0]} | {row[1]} | {row[2]} | {row[4]} | {mean} | {nxt} |")
+    source = (
+        "the posterior's draws (median; the discrepancy, and for the next measurement the "
+        "scatter, drawn with each)"
+        if fit.posterior is not None
+        else "the fit's covariance (Wald, delta method on log FR) with the discrepancy and "
+        "scatter sds; sample the posterior (idtool sample) for posterior bands"
+    )
+    head = [
+        "load [N]", "amplitude [um]", "speed [mm/s]", "frequency [kHz]", "FR",
+        "95% band, new condition", "95% band, next measurement", "reduction",
+    ]  # fmt: skip
+    out = (
+        f"<p>Friction ratio ON/OFF at each condition of the table; bands from {source}.</p>"
+        + table(head, rows)
+    )
+    return out, md
+
+
+def _estimates(fit: LevelsFit) -> str:
+    summary = fit.posterior.summary() if fit.posterior is not None else {}
+    rows = []
+    for name, e in fit.estimates.items():
+        s = summary.get(name)
+        post = f"{g(s['median'])} [{g(s['ci95'][0])}, {g(s['ci95'][1])}]" if s else "-"
+        rows.append([name, e.unit, g(e.estimate), e.statement, post])
+    for name in SD_NAMES:
+        s = summary.get(name)
+        post = f"{g(s['median'])} [{g(s['ci95'][0])}, {g(s['ci95'][1])}]" if s else "-"
+        value = fit.optimum.sds[name]
+        est = "not estimated" if value == 0 else g(value)
+        rows.append(
+            [name, "1 (relative sd)", est, "REML" if fit.optimum.restricted else "ML", post]
+        )
+    head = ["parameter", "unit", "fit estimate", "fit 95% interval", "posterior median [95%]"]
+    return table(head, rows)
+
+
+def _data(fit: LevelsFit) -> str:
+    t = fit.table
+    fitted = fit.fitted_fr
+    unit = "-" if t.friction == "coefficient" else "N"
+
+    def se(x: float) -> str:
+        return g(x) if np.isfinite(x) else "-"
+
+    rows = [
+        [
+            str(i + 1),
+            g(t.normal_load_n[i]),
+            g(t.amplitude_m[i] * 1e6),
+            g(t.vibration_frequency_hz[i] / 1e3),
+            g(t.sliding_speed_m_s[i] * 1e3),
+            g(t.off[i]),
+            se(t.off_se[i]),
+            g(t.on[i]),
+            se(t.on_se[i]),
+            t.repeat[i] or "-",
+            g(t.friction_ratio[i]),
+            g(fitted[i]),
+        ]
+        for i in range(t.n_rows)
+    ]
+    head = [
+        "row", "load [N]", "amplitude [um]", "frequency [kHz]", "speed [mm/s]",
+        f"OFF [{unit}]", "OFF se", f"ON [{unit}]", "ON se", "repeat", "FR", "FR fitted",
+    ]  # fmt: skip
+    return table(head, rows)
+
+
+def _convergence(fit: LevelsFit) -> str:
+    post = fit.posterior
+    if post is None:
+        return "<p>Not sampled: the intervals are the fit's (run idtool sample FITDIR).</p>"
+    d = post.diagnostics
+    rows = [
+        [n, g(v["tau"]), g(v["ess_bulk"]), f"{v['rhat']:.3f}"]
+        for n, v in d.get("parameters", {}).items()
+    ]
+    verdict = "converged" if post.converged else "NOT converged"
+    return (
+        f"<p>{html.escape(post.describe())}; burn-in {d.get('burn_in')}, {post.n_draws} draws "
+        f"kept; rule: {html.escape(str(d.get('rule', '')))}. Verdict: <b>{verdict}</b>.</p>"
+        + table(["parameter", "tau [steps]", "bulk ESS", "R-hat"], rows)
+    )
+
+
+def write_levels_report(fit_folder: str | Path) -> Path:
+    """Write ``report.html``, ``report.md`` and ``figures/`` into a table fit's folder
+    (module docstring); returns the path of ``report.html``."""
+    folder = Path(fit_folder)
+    fit = load_levels_fit(folder)
+    t = fit.table
+    parts = [(folder / FIT_JSON).read_bytes()]
+    if (folder / POSTERIOR_NC).is_file():
+        parts.append((folder / POSTERIOR_NC).read_bytes())
+    rid = report_id(*parts, b"levels")
+    answer, md_answer = _bands(fit)
+    sec: dict[str, str] = {"Answer": f'<div class="answer">{answer}</div>'}
+    with atomic_output_dir(folder / "figures", force=True) as figs:
+        if fit.spans_speeds:
+            fit.plot_speed(figs / FIGURE)
+            sec["Answer"] += (
+                "<h3>Friction ratio against sliding speed</h3>"
+                + img(figs / FIGURE, "FR against sliding speed with 95% bands")
+                + '<p class="note">Curve: the model; dark band: FR at a new condition; '
+                "light: the next measurement; points: the table's rows with 1.96 standard "
+                "errors. Also figures/fr_vs_speed.png.</p>"
+            )
+        else:
+            sec["Answer"] += '<p class="note">The table has one speed: no curve against speed.</p>'
+    sec["What to measure next"] = f"<p>{html.escape(NO_PLAN)}</p>"
+    sec["Estimates"] = _estimates(fit)
+    sec["Data"] = _data(fit)
+    if fit.notes:
+        sec["Notes"] = "<ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in fit.notes) + "</ul>"
+    sec["Convergence"] = _convergence(fit)
+    m = fit.model
+    doc = fit.to_json()
+    sec["Provenance"] = kv_table(
+        {
+            "dataset": doc["dataset"],
+            "model": doc["model"],
+            "fit seed": fit.seed,
+            "fit seconds": fit.seconds,
+            "sampling": None
+            if fit.posterior is None
+            else {"seed": fit.posterior.seed, "timing": fit.posterior.timing},
+            "idtool": __version__,
+        }
+    )
+    sec["Sign-off"] = signoff()
+    banners = "".join(
+        f'<div class="banner">{html.escape(w)}</div>'
+        for w in (
+            *fit.warnings,
+            *(
+                ["the posterior chain did NOT converge: continue it (idtool sample --resume)"]
+                if fit.posterior is not None and not fit.posterior.converged
+                else []
+            ),
+        )
+    )
+    posterior = "none (bands from the fit's covariance)"
+    if fit.posterior is not None:
+        posterior = fit.posterior.describe()
+    header = table(
+        None,
+        [
+            ["material", t.material],
+            ["dataset", f"{t.name}: friction table, {t.n_rows} rows; sha256 {t.sha256}"],
+            ["source", t.source or "-"],
+            ["model", f"{m.law} friction, {m.coupling} coupling, vibration {m.direction}"],
+            ["posterior", posterior],
+            ["report", f"{rid}, {now_utc()}, idtool {__version__}"],
+        ],
+        cls="meta",
+    )
+    title = f"idtool report: {t.name} (friction table)"
+    document = page(title, header, banners, sec)
+    md = [f"# {title}", "", f"Report {rid}", "", *md_answer, "", *(f"- {w}" for w in fit.warnings)]
+    out = write_text_atomic(folder / REPORT_HTML, document)
+    write_text_atomic(folder / REPORT_MD, "\n".join(md) + "\n")
+    return out
