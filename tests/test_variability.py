@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -14,7 +15,13 @@ import pytest
 import idtool
 from idtool._fit import _reml as reml
 from idtool._fit._discrepancy import Conditioning, correlation, discrepancy_moments
-from idtool._fit._free_levels import INFORMED_ON, _free_step, _linearise
+from idtool._fit._free_levels import (
+    INFORMED_ON,
+    _free_step,
+    _gauss_newton,
+    _linearise,
+    _linearise_at,
+)
 from idtool._fit._level_design import discrepancy_conditioning
 from idtool._fit._program import u_normal_equations
 from idtool._posterior._groups import _levels_terms, trace_rows
@@ -28,6 +35,8 @@ from idtool._posterior._levels import (
     replicate_in_blocks,
 )
 from idtool._predict._predict import Draws, with_variability
+from idtool._simulate._departures import departure_params
+from idtool._simulate._simulate import true_friction_ratio
 
 
 @pytest.fixture(scope="module")
@@ -91,6 +100,44 @@ def test_free_levels_match_the_model_where_it_is_right(example_fits):
     z = (free.friction_ratio[k] - on.result.friction_ratio[k]) / free.friction_ratio_se[k]
     assert k.sum() >= 10
     assert np.max(np.abs(z)) < 4.0 and abs(np.mean(z)) < 1.0
+
+
+@pytest.mark.slow
+def test_free_levels_are_the_traces_own_where_the_model_is_far_from_them():
+    """On a bench whose coupling law the fit does not ship (departure "coupling", seed
+    3: the physical model's ON level at 670 N, 50% sits 22 N below the data's) each
+    measured trace's own FR is its truth's within 4 standard errors, and so the mean FR
+    bands at the six measured operating points hold their truths. One Gauss-Newton step
+    from the physical levels (before iterating, ``ITERATE_ABOVE``) left those traces at
+    0.42 against 0.461, 14 standard errors off, and every one of the six bands missed."""
+    params = departure_params("coupling", 3)
+    dataset, truth = idtool.simulate_bench(params, seed=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the fit's misfit warnings: expected here
+        fit = idtool.fit(dataset, seed=0)
+    free = fit.result.variability.free
+    true_fr = np.array([t.friction_ratio for t in truth.traces])
+    k = free.measured
+    assert k.sum() >= 10
+    z = (free.friction_ratio[k] - true_fr[k]) / free.friction_ratio_se[k]
+    assert np.max(np.abs(z)) < 4.0, z
+    for p in fit.predict([270.0, 450.0, 670.0], [0.5, 0.7]):
+        fr = true_friction_ratio(params, p.normal_load_n, p.amplitude_fraction)
+        assert p.ci95[0] <= fr <= p.ci95[1], (p, fr)
+    # the levels are the free optimum: one more step from them moves no level by more
+    # than the iteration's stopping threshold (its steps shrink quadratically)
+    res = fit.result
+    model, z = res.model, np.asarray(res.z)
+    state = res.noise_state
+    first, u = _free_step(model, z, state)
+    cc = _linearise(model, z, state)[3]  # the ON levels freed: as the first step chose
+    sb = int(np.sum(model.level_group < 0))
+    on_free = first.measured | (cc[:, sb + 1, sb + 1] > INFORMED_ON * cc[:, sb, sb])
+    _, cc, cr = _linearise_at(model, u, z, state)
+    h_b = _gauss_newton(np.zeros(0), cc, cr, sb, on_free)[1]
+    m = model.data.n_traces
+    moved = np.abs(h_b[:, :2]) / np.stack([u[:m], u[m : 2 * m]], axis=1)
+    assert np.max(moved[:, 0]) < 1e-5 and np.max(moved[k, 1]) < 1e-5
 
 
 def test_bands_carry_discrepancy_and_scatter():
@@ -194,7 +241,9 @@ def test_free_levels_in_blocks_are_the_dense_solution(example_fits):
     res = example_fits[1].result
     model, z, phi = res.model, np.asarray(res.z), res.phi
     k, m = model.n_physical, model.data.n_traces
-    free, u = _free_step(model, z, phi)
+    # the first Gauss-Newton step's algebra (the iterated steps solve the same system
+    # at the next linearisation)
+    free, u = _free_step(model, z, phi, max_steps=0)
     w, lv, _, cc, cr = _linearise(model, z, phi)
     jtj, jtr = u_normal_equations(model, cc, cr)
     info = np.diag(jtj)

@@ -25,10 +25,12 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
+from idtool._data._blocks import padded_size
 from idtool._fit._compiled import program
 from idtool._fit._discrepancy import psd_root
 from idtool._fit._level_cov import LevelCovariance, from_pairs
-from idtool._fit._program import run_lm
+from idtool._fit._lm import coloured_blocks
+from idtool._fit._program import level_structure, run_lm
 from idtool._model._benchmodel import BenchModel
 
 __all__ = ["INFORMED_ON", "MIN_AT_LEVEL_S", "FreeLevels", "free_levels", "model_log_levels"]
@@ -44,6 +46,23 @@ MIN_AT_LEVEL_S = 0.15
 # 176 and 294 N). Held below it, the model's value moves the OFF level by at most
 # sqrt(1e-3) = 3% of the value's error.
 INFORMED_ON = 1e-3
+# Gauss-Newton in ``u`` goes on from the first step while a step moves a level by more
+# than this fraction of itself. The block means are linear in a level only where the
+# force sits at it: the ramps into and out of the ON level last (OFF - ON) / slope, so a
+# first step from a physical model far from the data is biased. On the departure bench
+# "coupling" (seed 3: a coupling law the fit does not ship; the physical model's ON level
+# at 670 N, 50% 22 N below the data's) one step left those traces' own FRs at 0.42
+# against their truth 0.461, 14 standard errors off, and the FR bands at all six measured
+# operating points missed their truths; iterated, they are within their errors. The
+# error left by one step grows as the step squared (relative ~0.9 x step^2 there), so a
+# first step under 1% leaves ~1e-4 (on the example, a twentieth of the FRs' standard
+# errors) and costs nothing more.
+ITERATE_ABOVE = 0.01
+# ... each step halved until the residuals fall (a step from far off may overshoot: the
+# lag actuator's approach is curved), and stops when no level moves by more than this
+# fraction, or after MAX_STEPS; where no step lowers the residuals, the last one stands.
+CONVERGED_BELOW = 1e-6
+MAX_STEPS = 20
 # The free levels' own noise state replaces the fit's when they differ as much as the
 # fit's own refits would go on for (AbstractNoise.state_settled, idtool._fit._fit).
 
@@ -182,8 +201,12 @@ def _u_layout(model: BenchModel) -> tuple[np.ndarray, np.ndarray]:
     return np.flatnonzero(group < 0), own
 
 
-def _free_step(model: BenchModel, z: np.ndarray, state) -> tuple[FreeLevels, np.ndarray]:
-    """:func:`free_levels` at a given noise ``state``, and ``u`` at the free optimum.
+def _free_step(
+    model: BenchModel, z: np.ndarray, state, max_steps: int = MAX_STEPS
+) -> tuple[FreeLevels, np.ndarray]:
+    """:func:`free_levels` at a given noise ``state``, and ``u`` at the free optimum
+    (Gauss-Newton from the physical levels, at most ``1 + max_steps`` steps: module
+    constants).
 
     The normal equations in ``u`` are an arrowhead (the shared bench parameters, then
     per trace its levels and nuisances): solved through the Schur complement of the
@@ -197,26 +220,31 @@ def _free_step(model: BenchModel, z: np.ndarray, state) -> tuple[FreeLevels, np.
     sb = shared.size
     measured = _at_level_s(model, z, lv) >= MIN_AT_LEVEL_S
     on_free = measured | (cc[:, sb + 1, sb + 1] > INFORMED_ON * cc[:, sb, sb])
-    a, gs = cc[:, :sb, :sb].sum(axis=0), cr[:, :sb].sum(axis=0)
-    b, d, gb = cc[:, :sb, sb:].copy(), cc[:, sb:, sb:].copy(), cr[:, sb:].copy()
-    # an ON level held (not freed): its row and column out of the system
-    held = ~on_free
-    d[held, 1, :] = 0.0
-    d[held, :, 1] = 0.0
-    d[held, 1, 1] = 1.0
-    b[held, :, 1] = 0.0
-    gb[held, 1] = 0.0
-    d_inv = np.linalg.inv(d)  # (m, t, t)
-    e = d_inv @ b.transpose(0, 2, 1)  # (m, t, sb): D_i^-1 B_i^T
-    schur = a - np.einsum("msb,mbc->sc", b, e)
-    schur_inv = np.linalg.inv(schur) if sb else np.zeros((0, 0))
-    h_s = schur_inv @ (gs - np.einsum("mbs,mb->s", e, gb))
-    h_b = np.einsum("mbc,mc->mb", d_inv, gb) - e @ h_s
     u = np.concatenate([lv, z[k:]])
-    u[shared] -= h_s
-    u[own] -= h_b
+    # the levels the FRs are read from: every OFF level, the measured ON levels
+    levels = np.concatenate([np.arange(m), m + np.flatnonzero(measured)])
+
+    def step_of(solved) -> np.ndarray:
+        h = np.zeros_like(u)
+        h[shared], h[own] = solved[0], solved[1]
+        return h
+
+    solved = _gauss_newton(w, cc, cr, sb, on_free)
+    h = step_of(solved)
+    if _moved(h, u, levels) > ITERATE_ABOVE:
+        for _ in range(max_steps):
+            better = _line_search(model, z, state, u, h, float(w @ w), levels)
+            if better is None:
+                break  # no decrease along the step: the last step stands
+            u, (w, cc, cr) = better
+            solved = _gauss_newton(w, cc, cr, sb, on_free)
+            h = step_of(solved)
+            if _moved(h, u, levels) <= CONVERGED_BELOW:
+                break
+    h_s, h_b, d_inv, e, schur_inv, held = solved
+    u = u - h
     # the residual sum of squares at the free optimum, to second order
-    rss = float(w @ w) - float(gs @ h_s) - float(np.sum(gb * h_b))
+    rss = float(w @ w) - float(cr[:, :sb].sum(axis=0) @ h_s) - float(np.sum(cr[:, sb:] * h_b))
     sigma2 = rss / (w.size - (sb + h_b.size - int(held.sum())))
     idx = np.flatnonzero(measured)
     if not (np.all(u[:m] > 0.0) and np.all(u[m + idx] > 0.0)):
@@ -226,7 +254,7 @@ def _free_step(model: BenchModel, z: np.ndarray, state) -> tuple[FreeLevels, np.
     # y = (log OFF, log ON - log OFF for the measured): per trace its Jacobian in the
     # trace's own inputs (2, t)
     off, on = u[:m], u[m : 2 * m]
-    dy = np.zeros((m, 2, d.shape[1]))
+    dy = np.zeros((m, 2, d_inv.shape[1]))
     dy[:, 0, 0] = 1.0 / off
     dy[:, 1, 0] = np.where(measured, -1.0 / off, 0.0)
     with np.errstate(divide="ignore"):  # an unmeasured ON level may sit at zero
@@ -247,6 +275,68 @@ def _free_step(model: BenchModel, z: np.ndarray, state) -> tuple[FreeLevels, np.
         sigma_n=math.sqrt(sigma2),
         cov_parts=parts,
     ), u
+
+
+def _moved(h: np.ndarray, u: np.ndarray, levels: np.ndarray) -> float:
+    """The largest step of a level relative to the level."""
+    return float(np.max(np.abs(h[levels] / u[levels]), initial=0.0))
+
+
+def _line_search(model: BenchModel, z: np.ndarray, state, u, h, rss: float, levels):
+    """``u - t h`` for the largest ``t`` in 1, 1/2, ..., 1/64 that keeps the levels
+    positive and lowers the whitened residuals' sum of squares below ``rss``, with its
+    linearisation; None if none does."""
+    t = 1.0
+    for _ in range(7):
+        candidate = u - t * h
+        if np.all(candidate[levels] > 0.0):
+            w, cc, cr = _linearise_at(model, candidate, z, state)
+            if float(w @ w) < rss:
+                return candidate, (w, cc, cr)
+        t /= 2.0
+    return None
+
+
+def _gauss_newton(w, cc, cr, sb: int, on_free: np.ndarray):
+    """One Gauss-Newton step in ``u`` from each trace's blocks of the normal equations
+    (:func:`_linearise`): the steps of the shared bench parameters (sb,) and of each
+    trace's own inputs (m, t), and what the covariance needs (``D_i^-1``, ``D_i^-1
+    B_i^T``, the Schur complement's inverse, the held ON levels)."""
+    a, gs = cc[:, :sb, :sb].sum(axis=0), cr[:, :sb].sum(axis=0)
+    b, d, gb = cc[:, :sb, sb:].copy(), cc[:, sb:, sb:].copy(), cr[:, sb:].copy()
+    # an ON level held (not freed): its row and column out of the system
+    held = ~on_free
+    d[held, 1, :] = 0.0
+    d[held, :, 1] = 0.0
+    d[held, 1, 1] = 1.0
+    b[held, :, 1] = 0.0
+    gb[held, 1] = 0.0
+    d_inv = np.linalg.inv(d)  # (m, t, t)
+    e = d_inv @ b.transpose(0, 2, 1)  # (m, t, sb): D_i^-1 B_i^T
+    schur = a - np.einsum("msb,mbc->sc", b, e)
+    schur_inv = np.linalg.inv(schur) if sb else np.zeros((0, 0))
+    h_s = schur_inv @ (gs - np.einsum("mbs,mb->s", e, gb))
+    h_b = np.einsum("mbc,mc->mb", d_inv, gb) - e @ h_s
+    return h_s, h_b, d_inv, e, schur_inv, held
+
+
+@program()
+def _u_equations(model: BenchModel, structure, u, z, state):
+    """The whitened residuals and each trace's blocks of the normal equations in ``u``
+    at ``u`` (what :func:`_linearise` reads from the fit's program at the physical
+    levels), for the steps after the first."""
+    return coloured_blocks(lambda x: model.level_residuals(x, z, state), u, structure)
+
+
+def _linearise_at(model: BenchModel, u: np.ndarray, z: np.ndarray, state):
+    """:func:`_linearise`'s residuals and blocks at any ``u`` (its blocks padded as the
+    fit's programs are, :func:`~idtool._data._blocks.padded_size`)."""
+    n = model.data.force_n.shape[0]
+    padded = model.padded(padded_size(n))
+    w, cc, cr = _u_equations(
+        padded, level_structure(padded), jnp.asarray(u), jnp.asarray(z), jnp.asarray(state)
+    )
+    return np.asarray(w)[:n], np.asarray(cc), np.asarray(cr)
 
 
 def model_log_levels(model: BenchModel, z: np.ndarray, state):
