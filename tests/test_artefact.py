@@ -88,6 +88,7 @@ CALLS = {
     "warnings": lambda f, other, root: f.warnings,
     "notes": lambda f, other, root: f.notes,
     "coupling_laws": lambda f, other, root: f.coupling_laws,
+    "directions": lambda f, other, root: f.directions,
     "artefact": lambda f, other, root: f.artefact,
     "report": lambda f, other, root: f.report(),
     "draws": lambda f, other, root: f.draws(300, seed=2),
