@@ -233,11 +233,10 @@ def _free_step(
     h = step_of(solved)
     if _moved(h, u, levels) > ITERATE_ABOVE:
         for _ in range(max_steps):
-            better = _line_search(model, z, state, u, h, float(w @ w), levels)
+            better = _line_search(model, z, state, u, h, float(w @ w), levels, sb, on_free)
             if better is None:
                 break  # no decrease along the step: the last step stands
-            u, (w, cc, cr) = better
-            solved = _gauss_newton(w, cc, cr, sb, on_free)
+            u, (w, cc, cr), solved = better
             h = step_of(solved)
             if _moved(h, u, levels) <= CONVERGED_BELOW:
                 break
@@ -282,17 +281,26 @@ def _moved(h: np.ndarray, u: np.ndarray, levels: np.ndarray) -> float:
     return float(np.max(np.abs(h[levels] / u[levels]), initial=0.0))
 
 
-def _line_search(model: BenchModel, z: np.ndarray, state, u, h, rss: float, levels):
+def _line_search(
+    model: BenchModel, z: np.ndarray, state, u, h, rss: float, levels, sb: int, on_free
+):
     """``u - t h`` for the largest ``t`` in 1, 1/2, ..., 1/64 that keeps the levels
-    positive and lowers the whitened residuals' sum of squares below ``rss``, with its
-    linearisation; None if none does."""
+    positive, lowers the whitened residuals' sum of squares below ``rss`` and leaves a
+    solvable system there (an ON level pushed beyond the slope's reach has no
+    information left: departure "all", seed 601), with its linearisation and its
+    :func:`_gauss_newton` step; None if none does."""
     t = 1.0
     for _ in range(7):
         candidate = u - t * h
         if np.all(candidate[levels] > 0.0):
             w, cc, cr = _linearise_at(model, candidate, z, state)
             if float(w @ w) < rss:
-                return candidate, (w, cc, cr)
+                try:
+                    solved = _gauss_newton(w, cc, cr, sb, on_free)
+                except np.linalg.LinAlgError:
+                    solved = None
+                if solved is not None and all(np.all(np.isfinite(x)) for x in solved[:2]):
+                    return candidate, (w, cc, cr), solved
         t /= 2.0
     return None
 
