@@ -6,7 +6,17 @@ import gc
 import os
 from pathlib import Path
 
+from openblas_helpers import set_openblas_threads
+
 os.environ.setdefault("MPLBACKEND", "Agg")
+# One OpenBLAS thread per process, as the command line sets (idtool/_cli/_main.py): two
+# xdist workers on two cores with OpenBLAS's own threads each spun waiting on the other's
+# small solves (tests/test_plan.py: 41 -> 30 CPU s; an in-process fit_levels 5.7 -> 2.9 s,
+# the same estimates). Read by OpenBLAS when NumPy and SciPy load it: set here, before
+# they load in this process, and inherited by the xdist workers and notebook kernels
+# (tests/test_threads.py checks it). A plugin may have loaded NumPy's already (a run
+# without xdist): that one is set through its C interface.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 # No on-disk compilation cache in tests (the CLI turns it on when ``main`` runs): it did
 # not save time here (42.6 against 42.0 CPU minutes), and tests should not depend on
 # what an earlier run left on disk. (Worker crashes inside XLA's compiler were blamed on
@@ -18,6 +28,8 @@ import jax
 import pytest
 
 import idtool  # (importing it enables jax_enable_x64)
+
+set_openblas_threads(int(os.environ["OPENBLAS_NUM_THREADS"]))
 
 assert jax.config.jax_enable_x64, "idtool must switch JAX to 64-bit floats"
 
