@@ -69,8 +69,13 @@ def fitted(tmp_path_factory):
     dataset = dataclasses.replace(dataset, extensions={"x_operator": "J. Doe", "x_job": 4711})
     data = idtool.write_dataset(dataset, root / "data")
     out = root / "fits" / "r"
+    # one actuator and offset model (the data's), as tests/test_compare.py fits: the
+    # report is what is tested here, not the choice among candidate models (tests/
+    # test_fit.py fits this design with the defaults); a cold fit of the default four
+    # candidates took 13.6 CPU s, of one 7.5 (this file: 85.4 -> 77.5 CPU s)
+    argv = ["fit", str(data), "--out", str(out), "--actuator", "slope", "--offset", "constant"]
     with _recording_figures():
-        assert main(["fit", str(data), "--out", str(out)]) == 0
+        assert main(argv) == 0
         assert main(["report", str(out)]) == 0
     return out
 
