@@ -182,10 +182,19 @@ def test_energy_balance_of_the_transverse_kernel():
 
 
 # ------------------------------------------------------------------ normal
+# FR under normal oscillation and its mean indentation, compiled once: called eagerly,
+# each call traced and compiled its bisections' loops afresh (about 0.1 s a call, some
+# thirty calls here). The values are the eager ones to round-off (at most 3.3e-16 apart
+# at the points below), far inside every tolerance; the test against the direction's own
+# (eager) cycle average keeps the eager function.
+_normal_fr = jax.jit(idtool.normal_friction_ratio)
+_indentation = jax.jit(_mean_indentation)
+
+
 def return_map(beta, vt, n=20_000, cycles=3):
     """Time stepping of the elastic-perfectly plastic tangential spring under the
     normal force n(theta) (f <- clip(f + g dtheta, -n, n)): first order in the step."""
-    c = float(_mean_indentation(jnp.asarray(beta)))
+    c = float(_indentation(jnp.asarray(beta)))
     theta = (np.arange(n) + 0.5) * TWO_PI / n
     normal = beta * np.maximum(c + np.cos(theta), 0.0)
     step = vt * beta * TWO_PI / n
@@ -199,7 +208,7 @@ def return_map(beta, vt, n=20_000, cycles=3):
 
 @pytest.mark.parametrize(("beta", "vt"), [(0.5, 0.3), (1.0, 0.5), (2.0, 0.2), (5.0, 0.1)])
 def test_normal_matches_time_stepping(beta, vt):
-    fr = float(idtool.normal_friction_ratio(beta, vt))
+    fr = float(_normal_fr(beta, vt))
     coarse, mean_n = return_map(beta, vt, 10_000)
     fine, _ = return_map(beta, vt, 160_000)
     assert mean_n == pytest.approx(1.0, abs=1e-7)  # <N> = N0 (eq. N2)
@@ -211,7 +220,7 @@ def test_normal_matches_time_stepping(beta, vt):
 
 
 def test_normal_limits():
-    nfr = lambda b, v: float(idtool.normal_friction_ratio(b, v))  # noqa: E731
+    nfr = lambda b, v: float(_normal_fr(b, v))  # noqa: E731
     # no loss of contact: FR = 1 - beta h(vt), linear in the amplitude, FR -> 1 as a -> 0
     for vt in (0.1, 0.4, 0.8):
         h = (1.0 - nfr(0.5, vt)) / 0.5
@@ -226,7 +235,7 @@ def test_normal_limits():
     # mean indentation under contact loss (eq. N2): <max(c + cos, 0)> = 1 / beta
     t = np.linspace(0.0, TWO_PI, 400_001)
     for beta in (1.5, 4.0):
-        c = float(_mean_indentation(jnp.asarray(beta)))
+        c = float(_indentation(jnp.asarray(beta)))
         assert np.trapezoid(np.maximum(c + np.cos(t), 0.0), t) / TWO_PI == pytest.approx(
             1.0 / beta, abs=1e-9
         )
@@ -268,8 +277,8 @@ def test_gradients_are_finite_and_match_central_differences(direction):
         )
         return cls.cycle_average(law, v, a, w, n0).friction_ratio
 
-    def check(f, kt, a, lugre):
-        g = jax.grad(f, argnums=(0, 1))(kt, a)
+    def check(f, grad, kt, a, lugre):
+        g = grad(kt, a)
         assert all(np.isfinite(float(x)) for x in g)
         assert float(f(kt, a)) == pytest.approx(float(fr(kt, a, lugre)), abs=1e-14)
         fd_kt = _central(lambda k: float(f(k, a)), kt, 1e-5)
@@ -279,8 +288,9 @@ def test_gradients_are_finite_and_match_central_differences(direction):
 
     for lugre in (False, True):
         f = jax.jit(lambda k, x, lg=lugre: fr(k, x, lg))
+        grad = jax.jit(jax.grad(f, argnums=(0, 1)))  # compiled once for both points
         for kt, a in ((1e8, 1e-6), (3e8, 3e-6)):
-            check(f, kt, a, lugre)
+            check(f, grad, kt, a, lugre)
 
 
 # ------------------------------------------------------------------ the default
@@ -409,6 +419,6 @@ def test_the_stiffness_ratio_only_rescales_the_amplitude():
         vt = KAPPA * v / (a * w) / mu
         beta_s = kt * (s * a) / (s * KAPPA * n0)
         vt_s = s * KAPPA * v / (s * a * w) / mu
-        assert float(idtool.normal_friction_ratio(beta_s, vt_s)) == pytest.approx(
-            float(idtool.normal_friction_ratio(beta, vt)), abs=1e-15
+        assert float(_normal_fr(beta_s, vt_s)) == pytest.approx(
+            float(_normal_fr(beta, vt)), abs=1e-15
         )
