@@ -27,7 +27,10 @@ from idtool._predict._predict import Draws, _band
 
 __all__ = ["AmplitudeFor", "amplitude_for_reduction"]
 
-_BISECTIONS = 40  # slip amplitude resolution 2^-40 of full command's
+# The slip amplitude's resolution, 2^-26 (1.5e-8) of the full command's: the example's
+# amplitude for 30% moved by 1e-9 (of 0.123) from 40 halvings, a thousandth of its band's
+# Monte-Carlo error, and a warm report.html took 25% less CPU (the amplitude map).
+_BISECTIONS = 26
 
 
 @dataclasses.dataclass(frozen=True)
