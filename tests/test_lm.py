@@ -219,26 +219,36 @@ def test_the_fit_runs_through_optimistix(monkeypatch):
     assert len(calls) == 1 and isinstance(calls[0], ColouredLevenbergMarquardt)
 
 
-@pytest.mark.parametrize("max_steps", [3, 100])
-def test_optimistix_solver_takes_the_reference_loops_iterates(max_steps):
-    """The optimistix-driven solver and the plain while-loop (the reference the fit
-    benchmark times it against) run the same update: same steps, linearisations and
-    end point, to rounding (the closure-converted residual function may fuse
-    differently: 1e-12 on the internal scale, where standard errors are ~1e-2)."""
+@pytest.fixture(scope="module")
+def example_lm_programs():
+    """The example's model and the two drivers, each one jitted program with the step
+    budget traced (levenberg_marquardt's ``max_steps`` is a traced option): both budgets
+    below run the same two programs (each budget baked in compiled them twice, 2 x 7 s)."""
     data = prepare_fit_data(idtool.load_dataset(idtool.example_dataset_path()), periods_per_block=2)
     model = bench_model(data, "dahl", "power-limited")
     z0 = jnp.asarray(model.z0())
     mask = jnp.ones(z0.size, bool)
     structure = level_structure(model)
 
-    def run(m, z, drv):
+    def run(m, z, max_steps, drv):
         equations = jax.tree_util.Partial(bench_normal_equations, m, structure)
         return drv(equations, z, 0.2, mask, max_steps)
 
-    outs = [
-        jax.jit(lambda m, z, drv=drv: run(m, z, drv))(model, z0)
+    programs = [
+        jax.jit(lambda m, z, n, drv=drv: run(m, z, n, drv))
         for drv in (levenberg_marquardt, levenberg_marquardt_loop)
     ]
+    return model, z0, programs
+
+
+@pytest.mark.parametrize("max_steps", [3, 100])
+def test_optimistix_solver_takes_the_reference_loops_iterates(max_steps, example_lm_programs):
+    """The optimistix-driven solver and the plain while-loop (the reference the fit
+    benchmark times it against) run the same update: same steps, linearisations and
+    end point, to rounding (the closure-converted residual function may fuse
+    differently: 1e-12 on the internal scale, where standard errors are ~1e-2)."""
+    model, z0, programs = example_lm_programs
+    outs = [program(model, z0, jnp.asarray(max_steps)) for program in programs]
     ours, ref = outs
     assert int(ours.steps) == int(ref.steps) and int(ours.n_jacobians) == int(ref.n_jacobians)
     assert bool(ours.converged) == bool(ref.converged) == (max_steps == 100)
