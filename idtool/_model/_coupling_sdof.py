@@ -339,16 +339,28 @@ class SdofCoupling(AbstractCoupling):
             return jnp.sqrt(jnp.clip(1.0 - kink / a, 0.0, 1.0 - 1e-15))
 
         y_hi = y_of(jnp.maximum(a_hi, kink))
-        coarse = functools.partial(safeguarded, _COARSE_PHASE)
         start = (y_of(free), 0.0, y_hi, y_hi, False)
-        state = jax.lax.fori_loop(0, _STEPS, lambda _, s: coarse(s), start)
+        y = _iterate(functools.partial(safeguarded, _COARSE_PHASE), _STEPS, start)
         # the full grid's root is within ~1e-4 of the coarse one: Newton from there,
         # safeguarded in the whole bracket (the coarse one need not hold the fine root)
-        fine = functools.partial(safeguarded, 256)
-        y, *_ = jax.lax.fori_loop(
-            0, _FINE_STEPS, lambda _, s: fine(s), (state[0], 0.0, y_hi, y_hi, False)
-        )
+        y = _iterate(functools.partial(safeguarded, 256), _FINE_STEPS, (y, 0.0, y_hi, y_hi, False))
         _, slope = value_and_slope(y)
         y = y - residual(y, *args) / slope  # the implicit derivative (module docstring)
         a = jnp.where(loaded, kink / (1.0 - y**2), self.amplitude_m(alpha, 0.0, max_amplitude_m))
         return jnp.where(driven, a, 0.0)
+
+
+def _iterate(step, max_steps: int, state: tuple) -> Array:
+    """``y`` (the state's first entry) after at most ``max_steps`` safeguarded Newton
+    steps, stopping once the state says done (its last entry): a converged ``y`` stays
+    put, so stopping there gives the ``y`` the full budget gives, bit for bit, without
+    the steps after convergence (under ``vmap``, until every operating point is done).
+    Its start does not depend on the parameters (``stop_gradient``): nothing is
+    differentiated through the loop, the derivative is the implicit one after it."""
+
+    def more(carry):
+        i, s = carry
+        return (i < max_steps) & ~s[-1]
+
+    _, out = jax.lax.while_loop(more, lambda c: (c[0] + 1, step(c[1])), (0, state))
+    return out[0]
