@@ -36,24 +36,24 @@ coordinates, acceptance 0.15), 20,592 and 42,731 on seeds 2 and 3 (the load scal
 tau 371 and Kt's 539).
 
 So, as on the bench (:mod:`idtool._posterior._ridge`), when Kt's start interval spans
-more than :data:`~idtool._posterior._ridge.RIDGE_DECADES` the walkers are sheared
-along Kt's profile (:class:`~idtool._posterior._ridge.RidgeTarget` over the box: each
-other parameter as its offset from the profile's maximiser, Jacobian 1), start spread
-along it (:func:`~idtool._posterior._ridge.ridge_walkers`) and a tenth of the steps
-redraw Kt from the profile (the bench's ridge jump): the Kt arm becomes one straight
-direction. Kt rather than the widest parameter (the load scale, on most seeds): Kt's
-arm is the long thin one; profiled along the load scale instead, seed 0 took 13,023
-steps (Kt's tau 248) against 8,598. The shear cannot straighten the other arm (the load
-scale at a fixed Kt), so every other physical parameter whose start interval is that
-wide gets a move of its own, a tenth of the steps (:func:`redraw_move`): its place in
-its range redrawn uniformly, the rest kept, an independence proposal accepted by the
+more than :data:`~idtool._posterior._ridge.RIDGE_DECADES` the walkers are sheared along
+Kt's profile (:class:`~idtool._posterior._ridge.RidgeTarget` over the box: each other
+parameter as its offset from the profile's maximiser, Jacobian 1), start spread along it
+(:func:`~idtool._posterior._ridge.ridge_walkers`) and a tenth of the steps redraw Kt
+from the profile (the bench's ridge jump): the Kt arm becomes one straight direction. Kt
+rather than the widest parameter (the load scale, on most seeds): Kt's arm is the long
+thin one; profiled along the load scale instead, seed 0 took 13,023 steps (Kt's tau 248)
+against 8,598. The shear cannot straighten the other arm (the load scale at a fixed Kt),
+so every other physical parameter whose start interval is that wide gets a move of its
+own, a tenth of the steps (:func:`~idtool._levels._moves.redraw_move`): its place in its
+range redrawn uniformly, the rest kept, an independence proposal accepted by the
 posterior's ratio (Metropolis within Gibbs): one proposal reaches any point of the arm.
 Seed 2: 7,986 steps (the load scale's tau 110) against 24,437 along the ridge alone.
 Both moves take their share from differential evolution and the snooker
-(:func:`table_moves`); the bench sampler's moves are unchanged. The chain records the
-shear and the redrawn parameters (``ridge``, ``redraw``), so a resumed chain rebuilds
-both. Every move keeps the posterior: the distribution sampled is the one before, on
-other coordinates.
+(:func:`~idtool._levels._moves.table_moves`); the bench sampler's moves are unchanged.
+The chain records the shear and the redrawn parameters (``ridge``, ``redraw``), so a
+resumed chain rebuilds both. Every move keeps the posterior: the distribution sampled is
+the one before, on other coordinates.
 
 Walkers start around the fit's estimate with its covariance, widened on each
 parameter to its 95% interval's width (the profile's where it is not Wald's, one
@@ -83,11 +83,12 @@ from idtool._fit._variability import SD_PARAMS
 from idtool._lawfit._profile import Side
 from idtool._levels._estimate import SD_NAMES, Optimum, _data
 from idtool._levels._model import LevelsModel
+from idtool._levels._moves import table_moves
 from idtool._model._params import Param
 from idtool._posterior._box import BoxTarget, base_internal, ridge_in_box
 from idtool._posterior._chainfile import last_state, read_settings
 from idtool._posterior._levels import SD_PRIOR
-from idtool._posterior._moves import batch_rows, sampler_moves
+from idtool._posterior._moves import batch_rows
 from idtool._posterior._prior import Prior, default_prior, parse_priors, read_priors
 from idtool._posterior._record import LEVELS, PosteriorRecord
 from idtool._posterior._ridge import RidgeTarget, ridge_profile, ridge_walkers, weak_parameter
@@ -237,46 +238,6 @@ def _wide(params: tuple[Param, ...], theta: np.ndarray, cov: np.ndarray, k: int)
         for i in range(k)
         if weak_parameter((params[i],), theta[i : i + 1], cov[i : i + 1, i : i + 1], 1) is not None
     ]
-
-
-def redraw_move(sampled: BoxTarget | RidgeTarget, index: int):
-    """An ``emcee.moves.MHMove`` that redraws parameter ``index``'s place in its range
-    (its box coordinate ``u``) uniformly over ``(0, 1)``, every other coordinate kept
-    (module docstring). Along a ridge the walkers hold the parameter's offset from the
-    ridge's path, ``x = u - path(z)``: the path's value at the walker's own profiled
-    coordinate ``z`` (which this move keeps) is subtracted. The proposal does not depend
-    on the walker's place, so its Hastings factor is zero and the move keeps the
-    target (Metropolis within Gibbs, an independence proposal on one coordinate)."""
-    import emcee
-
-    if isinstance(sampled, RidgeTarget):
-        grid, path, along = np.asarray(sampled.grid), np.asarray(sampled.path), sampled.index
-    else:
-        grid, path, along = np.zeros(2), np.zeros((2, len(sampled.slopes))), None
-
-    def propose(coords: np.ndarray, random: Any) -> tuple[np.ndarray, np.ndarray]:
-        n = coords.shape[0]
-        shift = 0.0 if along is None else np.interp(coords[:, along], grid, path[:, index])
-        new = np.array(coords, float, copy=True)
-        new[:, index] = random.rand(n) - shift
-        return new, np.zeros(n)
-
-    return emcee.moves.MHMove(propose)
-
-
-def table_moves(sampled: BoxTarget | RidgeTarget, redraw: list[int]):
-    """The table sampler's moves (module docstring): the levels posterior's
-    (:func:`~idtool._posterior._moves.sampler_moves`, with the ridge's jump along it),
-    and a tenth of the steps per parameter in ``redraw`` (:func:`redraw_move`), taken
-    from differential evolution and the snooker alike."""
-    ridge = sampled if isinstance(sampled, RidgeTarget) else None
-    moves = list(sampler_moves(LEVELS, ridge))
-    extra = [(redraw_move(sampled, i), 0.1) for i in redraw]
-    if not extra:
-        return moves
-    share = 0.05 * len(extra)
-    (de, w_de), (snooker, w_snooker), *rest = moves
-    return [(de, w_de - share), (snooker, w_snooker - share), *rest, *extra]
 
 
 def sample_table(
