@@ -172,6 +172,9 @@ GROUPS: dict[str, tuple[str, ...]] = {
         "tests/test_fit.py",
         "tests/test_report.py",
         "tests/test_validate_fit.py",
+        # fits the example with every default and samples it (in this process: 33 ->
+        # 13 CPU s after these files)
+        "tests/test_notebooks.py[03_uncertainty_design_maps]",
     ),
     # sample_helpers.small_params: the bank's small fit, its posteriors
     "the small design": ("tests/test_arviz.py", "tests/test_predict.py", "tests/test_sample.py"),
@@ -187,7 +190,8 @@ FILE_SECONDS: dict[str, float] = {
     "tests/test_compare.py": 335,  # 2026-11-26: two compares --no-figures, 87.8 -> 64.3 CPU s
     "tests/test_coverage.py": 370,
     "tests/test_notebooks.py[02_fit_new_material]": 155,  # 94.5 -> 51.2 CPU s (5 fits)
-    "tests/test_notebooks.py[03_uncertainty_design_maps]": 210,
+    # 2026-11-27: in the group of the paper's matrix, in-process: 33 -> 13 CPU s
+    "tests/test_notebooks.py[03_uncertainty_design_maps]": 45,
     "tests/test_notebooks.py[01_seed_model]": 125,
     "tests/test_sample_until_converged.py": 270,  # the example's fit: the bank's
     "tests/test_coupling_sdof.py": 215,  # 2026-11-26: 154.9 -> ~124 CPU s (D = 0 once, jit)
@@ -232,28 +236,37 @@ FILE_SECONDS: dict[str, float] = {
 _GROUP_OF = {path: name for name, paths in GROUPS.items() for path in paths}
 
 
-def work_unit(nodeid: str) -> str:
-    """The unit of ``nodeid`` a worker takes whole: its group of :data:`GROUPS`, else its
-    file, or its file and parameter for the files of :data:`SPLIT_BY_PARAMETER`."""
+def _split_unit(nodeid: str) -> str:
+    """``nodeid``'s file, or its file and parameter for :data:`SPLIT_BY_PARAMETER`."""
     path = nodeid.split("::", 1)[0]
-    if path in _GROUP_OF:
-        return _GROUP_OF[path]
     if path in SPLIT_BY_PARAMETER and nodeid.endswith("]") and "[" in nodeid:
         return f"{path}[{nodeid[nodeid.index('[') + 1 : -1]}]"
     return path
 
 
+def work_unit(nodeid: str) -> str:
+    """The unit of ``nodeid`` a worker takes whole: the group of :data:`GROUPS` that
+    lists its file (or its file and parameter), else :func:`_split_unit`."""
+    unit = _split_unit(nodeid)
+    return _GROUP_OF.get(unit, _GROUP_OF.get(nodeid.split("::", 1)[0], unit))
+
+
 def _unit_seconds(nodeids: list[str]) -> dict[str, float]:
-    """Estimated seconds of each unit: its own figure, else its files' (a split file's
-    shared among its units), summed over a group's files."""
-    units_of: dict[str, set[str]] = {}
+    """Estimated seconds of each unit: the sum of its parts' figures (a file's, or a
+    split file's part's own, else its share of the file's)."""
+    parts_of: dict[str, set[str]] = {}
     for nodeid in nodeids:
-        units_of.setdefault(nodeid.split("::", 1)[0], set()).add(work_unit(nodeid))
+        parts_of.setdefault(nodeid.split("::", 1)[0], set()).add(_split_unit(nodeid))
     seconds: dict[str, float] = {}
-    for path, units in units_of.items():
-        for unit in units:
-            share = FILE_SECONDS.get(unit, FILE_SECONDS.get(path, 1.0) / len(units))
-            seconds[unit] = seconds.get(unit, 0.0) + share
+    counted: set[str] = set()
+    for nodeid in nodeids:
+        part, path = _split_unit(nodeid), nodeid.split("::", 1)[0]
+        if part in counted:
+            continue
+        counted.add(part)
+        share = FILE_SECONDS.get(part, FILE_SECONDS.get(path, 1.0) / len(parts_of[path]))
+        unit = work_unit(nodeid)
+        seconds[unit] = seconds.get(unit, 0.0) + share
     return seconds
 
 
