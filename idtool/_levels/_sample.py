@@ -373,7 +373,8 @@ def sample_table(
     chain, lp, acc = store.read()
     chain = np.asarray(base_internal(sampled, jnp.asarray(chain)))
     values = np.stack(
-        [np.asarray(p.value(jnp.asarray(chain[:, :, i]))) for i, p in enumerate(params)], axis=-1
+        [np.asarray(p.value(np.asarray(chain[:, :, i], float))) for i, p in enumerate(params)],
+        axis=-1,
     )
     timing = {
         "mode_search_s": mode_s,

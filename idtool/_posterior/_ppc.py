@@ -83,7 +83,8 @@ def replicate_blocks(theta: np.ndarray, target: Target, seed: int) -> tuple[np.n
     noise-free model means."""
     means = np.asarray(_means(jnp.asarray(theta), target))
     by_name = {
-        p.name: np.asarray(p.value(jnp.asarray(theta[:, i]))) for i, p in enumerate(target.params)
+        p.name: np.asarray(p.value(np.asarray(theta[:, i], float)))
+        for i, p in enumerate(target.params)
     }
     rng = np.random.default_rng(seed)
     noise = target.model.noise.simulate(rng, by_name, np.asarray(target.first))

@@ -412,7 +412,8 @@ def sample_posterior(
     if sheared is not None:  # the sampled coordinates back to the internal scale
         chain = np.asarray(base_internal(sheared, jnp.asarray(chain)))
     values = np.stack(
-        [np.asarray(p.value(jnp.asarray(chain[:, :, i]))) for i, p in enumerate(params)], axis=-1
+        [np.asarray(p.value(np.asarray(chain[:, :, i], float))) for i, p in enumerate(params)],
+        axis=-1,
     )
     if stored is not None:
         warnings = tuple(stored.get("warnings", ()))

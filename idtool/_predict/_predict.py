@@ -114,9 +114,14 @@ class Draws:
         """Mean and variance of the discrepancy (log FR) at operating points ``x_new``
         (p, 3) per draw, given the data: (draws, p) each."""
         x_rows, scales, weights, s_inv, sd = self.kriging
-        one = jax.vmap(discrepancy_moments, in_axes=(None, None, None, 0, 0, 0))
-        mean, var = one(jnp.asarray(x_new), x_rows, scales, weights, s_inv, sd)
+        mean, var = _discrepancy_draws(jnp.asarray(x_new), x_rows, scales, weights, s_inv, sd)
         return np.asarray(mean), np.asarray(var)
+
+
+# one compiled program per shape: run op by op, the same moments were ~15 programs each,
+# compiled for every new number of points or draws (8 CPU s of the compilation in
+# tests/test_variability.py and tests/test_artefact.py)
+_discrepancy_draws = jax.jit(jax.vmap(discrepancy_moments, in_axes=(None, None, None, 0, 0, 0)))
 
 
 def _thin(n: int, max_draws: int) -> np.ndarray:
@@ -222,7 +227,7 @@ def draws_from_covariance(
                 "given each draw's sds)"
             )
     values = {
-        p.name: np.asarray(p.value(jnp.asarray(draws[:, i])))
+        p.name: np.asarray(p.value(np.asarray(draws[:, i], float)))
         for i, p in enumerate(model.shared_params[:k])
     }
     note = (
