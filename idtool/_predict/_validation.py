@@ -33,7 +33,7 @@ from idtool._data._blocks import prepare_fit_data
 from idtool._data._dataset import Dataset
 from idtool._errors import IdtoolError
 from idtool._fit._free_levels import free_levels
-from idtool._fit._program import run_lm
+from idtool._fit._program import prediction_at, run_lm
 from idtool._model._benchmodel import BenchModel, bench_model
 from idtool._predict._predict import Draws, predict_friction_ratio
 
@@ -195,7 +195,9 @@ def validate(
             f"{_STEPS} steps; are they from the same bench and model?"
         )
     zv = np.asarray(out.z)
-    pred = np.asarray(held.predict(jnp.asarray(zv)))
+    # from the program that just ran (no step): op by op, the model's prediction was
+    # ~100 operations compiled one by one
+    pred = prediction_at(held, zv, state)[0]
     d = held.data
     try:
         free = free_levels(held, zv, state)
