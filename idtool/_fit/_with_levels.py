@@ -13,6 +13,7 @@ import numpy as np
 from idtool._diagnostic import Diagnostic
 from idtool._fit._free_levels import free_levels, model_log_levels
 from idtool._fit._level_design import level_design
+from idtool._fit._level_profile import check_level_intervals
 from idtool._fit._reml import GRID, evaluate, fit_sds
 from idtool._fit._result import FitResult, estimate_of
 from idtool._fit._variability import NoMeasuredLevels, estimate_variability
@@ -37,8 +38,9 @@ def compile_variability(result: FitResult) -> None:
 
 def with_variability(result: FitResult) -> FitResult:
     """``result`` under the levels model (module docstring): the physical parameters,
-    their covariance and the per-trace friction ratios from stage 2, the sds and the
-    lack-of-fit test in :attr:`FitResult.variability`, its warnings added. The bench
+    their covariance and the per-trace friction ratios from stage 2, their intervals
+    checked against its profile likelihood (:mod:`idtool._fit._level_profile`), the sds
+    and the lack-of-fit test in :attr:`FitResult.variability`, its warnings added. The bench
     parameters and nuisances stay the fit's."""
     model = result.model
     k, m = model.n_physical, model.data.n_traces
@@ -60,6 +62,8 @@ def with_variability(result: FitResult) -> FitResult:
     estimates = dict(result.estimates)
     for i, spec in enumerate(model.shared_params[:k]):
         estimates[spec.name] = estimate_of(spec, z[i], se_z[i])
+    # the Wald intervals checked against the levels model's profile likelihood
+    estimates, profiled = check_level_intervals(model, result.noise_state, v, z, se_z, estimates)
     g, jac = model_log_levels(model, z, result.noise_state)
     fr = np.exp(g[m:])
     # the delta method's variance as a sum of squares over the covariance's eigenvectors:
@@ -75,7 +79,7 @@ def with_variability(result: FitResult) -> FitResult:
         estimates=estimates,
         friction_ratio=fr,
         friction_ratio_se=fr_se,
-        warnings=[*result.warnings, *v.warnings],
+        warnings=[*result.warnings, *v.warnings, *profiled],
         notes=[*result.notes, *v.notes],
         variability=v,
     )
