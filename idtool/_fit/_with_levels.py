@@ -60,6 +60,7 @@ def with_variability(result: FitResult) -> FitResult:
     cov = result.cov_z.with_leading(k, v.cov_theta)
     se_z = np.sqrt(np.diag(v.cov_theta))
     estimates = dict(result.estimates)
+    physical = {spec.name for spec in model.shared_params[:k]}
     for i, spec in enumerate(model.shared_params[:k]):
         estimates[spec.name] = estimate_of(spec, z[i], se_z[i])
     # the Wald intervals checked against the levels model's profile likelihood
@@ -79,7 +80,22 @@ def with_variability(result: FitResult) -> FitResult:
         estimates=estimates,
         friction_ratio=fr,
         friction_ratio_se=fr_se,
-        warnings=[*result.warnings, *v.warnings, *profiled],
+        warnings=[*_kept(result.warnings, physical), *v.warnings, *profiled],
         notes=[*result.notes, *v.notes],
         variability=v,
     )
+
+
+def _kept(warnings: list, physical: set[str]) -> list:
+    """The noise-only fit's ``warnings`` that still hold under the levels model: not its
+    ``profile_interval`` warnings on the physical parameters, whose intervals the levels
+    model replaces (each said its profile interval was "reported instead"; the levels
+    model's own check, :mod:`idtool._fit._level_profile`, warns where its interval is
+    widened)."""
+    return [
+        w
+        for w in warnings
+        if not (
+            getattr(w, "code", None) == "profile_interval" and w.values.get("parameter") in physical
+        )
+    ]
