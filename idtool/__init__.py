@@ -144,6 +144,7 @@ _LAZY = {
     "LevelsPrediction": "idtool._levels._result",
     "LevelsPosterior": "idtool._levels._sample",
     "load_levels_fit": "idtool._levels._store",
+    "TableComparison": "idtool._levels._compare",
 }
 
 # The one list of public names: __all__ is read from it, and the TYPE_CHECKING block
@@ -225,6 +226,9 @@ if TYPE_CHECKING:
     )
     from idtool._levels._api import (
         fit_levels as fit_levels,
+    )
+    from idtool._levels._compare import (
+        TableComparison as TableComparison,
     )
     from idtool._levels._result import (
         LevelsFit as LevelsFit,

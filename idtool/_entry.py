@@ -18,6 +18,9 @@ from idtool._errors import IdtoolError
 from idtool._fit._parameter_table import parse_fix, read_parameter_table
 from idtool._fit._run import fit_dataset
 from idtool._fit._store import load_artefact
+from idtool._levels._compare import TableComparison, compare_tables
+from idtool._levels._result import LevelsFit
+from idtool._levels._store import is_levels_fit, load_levels_fit
 from idtool._model._names import BY_DESIGN, DEFAULT_DIRECTION
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._settings import ParameterSetting
@@ -150,7 +153,7 @@ def load_fit(path: str | os.PathLike) -> Fit:
 
 
 def compare_fits(
-    fits: Sequence[Fit | str | os.PathLike],
+    fits: Sequence[Fit | LevelsFit | str | os.PathLike],
     load_n: float | Sequence[float] | None = None,
     amplitude: float | Sequence[float] | None = None,
     *,
@@ -158,16 +161,28 @@ def compare_fits(
     targets: Sequence[float] = TARGETS,
     max_draws: int = 2000,
     seed: int = 0,
-) -> Comparison:
+) -> Comparison | TableComparison:
     """Compare two or more fits (fit folders or :class:`~idtool.Fit`) at the loads
     ``load_n`` [N] x commanded amplitude fractions ``amplitude`` (default: the values
     every fit tested, else the first fit's) and ``speed_m_s`` [m/s] (default: the fits'
     common pull speed). The first fit is the reference: the probability that it reduces
     friction more than each other fit, from ``max_draws`` independent draws of each
     (posterior, else the fit's covariance: flagged), and the amplitude each needs for
-    ``targets`` [% reduction]. Fits from different rigs are refused (IdtoolError)."""
-    labels, checked = compare_request(fits, targets, max_draws)
-    loaded = [f if isinstance(f, Fit) else load_fit(f) for f in fits]
+    ``targets`` [% reduction]. Fits from different rigs are refused (IdtoolError).
+
+    Fits of friction tables (:class:`~idtool.LevelsFit` or their folders, all of them)
+    are compared at the conditions every table measured (:func:`~idtool._levels.
+    _compare.compare_tables`; ``load_n`` and ``speed_m_s`` replace the tables' loads or
+    speeds; ``amplitude`` and ``targets`` do not apply): a :class:`TableComparison`."""
+    tables = [
+        isinstance(f, LevelsFit) or (not isinstance(f, Fit) and is_levels_fit(Path(f)))
+        for f in fits
+    ]
+    if any(tables):
+        return _compare_tables(fits, tables, load_n, amplitude, speed_m_s, targets, max_draws, seed)
+    traces = [f for f in fits if not isinstance(f, LevelsFit)]
+    labels, checked = compare_request(traces, targets, max_draws)
+    loaded = [f if isinstance(f, Fit) else load_fit(f) for f in traces]
     return compare(
         loaded,
         labels,
@@ -178,3 +193,29 @@ def compare_fits(
         max_draws=max_draws,
         seed=seed,
     )
+
+
+def _compare_tables(fits, tables, load_n, amplitude, speed_m_s, targets, max_draws, seed):
+    """:func:`compare_fits` of table fits: every one a table's, no trace-only option."""
+    if not all(tables):
+        raise IdtoolError(
+            "compare fits of one kind: "
+            + ", ".join(str(f) for f, t in zip(fits, tables, strict=True) if not t)
+            + " fitted bench traces, the others friction tables (kind: levels)"
+        )
+    if amplitude is not None or tuple(targets) != tuple(TARGETS):
+        raise IdtoolError(
+            "--amplitude and --targets apply to fits of bench traces: a table fit is compared "
+            "at its tables' amplitudes [m] (give --load or --speed to move the conditions)"
+        )
+    loaded = [f if isinstance(f, LevelsFit) else load_levels_fit(f) for f in fits]
+    labels = [f.table.name if isinstance(f, LevelsFit) else Path(f).resolve().name for f in fits]
+    loads = None if load_n is None else list(_as_list(load_n))
+    speeds = None if speed_m_s is None else list(_as_list(speed_m_s))
+    return compare_tables(
+        loaded, labels, load_n=loads, speed_m_s=speeds, max_draws=max_draws, seed=seed
+    )
+
+
+def _as_list(x) -> list[float]:
+    return [float(v) for v in (x if isinstance(x, (list, tuple)) else [x])]

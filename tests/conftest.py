@@ -232,6 +232,7 @@ FILE_SECONDS: dict[str, float] = {
     "tests/test_dataset.py": 14,
     "tests/test_diagnostic.py": 7,
     "tests/test_ridge_jump.py": 120,  # 2026-11-26: three 32 x 4000 chains on a 2-D target
+    "tests/test_levels_compare.py": 90,  # 2026-11-27: three 54-row table fits, 4 compares
 }
 _GROUP_OF = {path: name for name, paths in GROUPS.items() for path in paths}
 

@@ -128,24 +128,27 @@ def test_import_round_trip_in_si_and_refuses_to_overwrite(tmp_path):
 
 
 # ------------------------------------------------------------------ recovery
-def simulate_table(seed: int, *, scatter_fr=0.03, discrepancy=0.02, scatter_mu=0.02):
-    """3 loads x 3 amplitudes x 2 speeds x 3 repeats at :data:`TRUTH` (Dahl, the power
-    limit, vibration along the sliding: the defaults), FR from the public
+def simulate_table(
+    seed: int, *, scatter_fr=0.03, discrepancy=0.02, scatter_mu=0.02, truth=None, name=None
+):
+    """3 loads x 3 amplitudes x 2 speeds x 3 repeats at ``truth`` (default :data:`TRUTH`;
+    Dahl, the power limit, vibration along the sliding: the defaults), FR from the public
     :func:`idtool.on_friction_ratio`; log-normal pull-to-pull scatter per row and a
     discrepancy per condition."""
+    truth = TRUTH if truth is None else truth
     rng = np.random.default_rng(seed)
     grid = np.array(
         [(n, a, v) for n in (20.0, 50.0, 100.0) for a in (2e-6, 4e-6, 6e-6) for v in (0.02, 0.08)]
     )
     rows = np.repeat(grid, 3, axis=0)
     coupling = idtool.PowerLimitedCoupling(
-        gain=TRUTH["coupling_gain"], power_load_n=TRUTH["power_load_n"]
+        gain=truth["coupling_gain"], power_load_n=truth["power_load_n"]
     )
     fr = np.array(
         [
             float(
                 idtool.on_friction_ratio(
-                    idtool.Dahl.at_load(TRUTH, n), coupling, n, a / 6e-6, v, 22e3, 6e-6
+                    idtool.Dahl.at_load(truth, n), coupling, n, a / 6e-6, v, 22e3, 6e-6
                 )
             )
             for n, a, v in grid
@@ -153,11 +156,11 @@ def simulate_table(seed: int, *, scatter_fr=0.03, discrepancy=0.02, scatter_mu=0
     )
     condition = np.repeat(np.arange(len(grid)), 3)
     d = rng.normal(0.0, discrepancy, len(grid))[condition]
-    off = TRUTH["mu"] * rows[:, 0] * np.exp(rng.normal(0.0, scatter_mu, len(rows)))
+    off = truth["mu"] * rows[:, 0] * np.exp(rng.normal(0.0, scatter_mu, len(rows)))
     on = off * fr[condition] * np.exp(d + rng.normal(0.0, scatter_fr, len(rows)))
     nan = np.full(len(rows), np.nan)
     return idtool.LevelsTable(
-        name=f"simulated-{seed}",
+        name=name or f"simulated-{seed}",
         material="simulated",
         friction="force",
         normal_load_n=rows[:, 0],

@@ -132,3 +132,46 @@ def test_bad_options_are_located(tmp_path, capsys, option, value, says):
     err = capsys.readouterr().err
     assert says in err and "Traceback" not in err
     assert not (tmp_path / "out").exists()
+
+
+class _Law:
+    """A coupling law as the laws goal reads it (``weight``, ``predictive_rows``): each
+    candidate pull's (log OFF, log FR) predicted with unit-free means ``means[c]`` and
+    variance 0.01 each."""
+
+    def __init__(self, weight: float, means: list[tuple[float, float]]):
+        self.weight = weight
+        self.means = np.asarray(means, float)
+        self.cand_rows = np.zeros((len(means), 2, 1))
+
+    def predictive_rows(self, cands):
+        mean = self.means[np.asarray(cands)].reshape(-1)
+        return mean, np.eye(mean.size)[None] * 0.01
+
+    def copy(self):
+        return self
+
+
+def test_laws_goal_is_the_expected_weight_of_the_true_law():
+    """Two laws at 0.6 and 0.398 that part at candidate 1 only, and one kept at 0.002
+    that parts from them at candidate 2 only: the goal (the weights' average of each
+    law's expected weight if true) picks candidate 1. The smallest over the laws, the
+    goal before, picked candidate 2 and spent the plan on the law the data had all but
+    excluded (issue 29: the true law's weight then rose on fewer simulated truths)."""
+    from idtool._plan._goals import law_goal, law_values
+    from idtool._plan._select import greedy
+
+    laws = [
+        _Law(0.6, [(0.0, 0.0), (0.0, 0.0), (0.0, 0.0)]),
+        _Law(0.398, [(0.0, 0.0), (0.0, 1.0), (0.0, 0.0)]),
+        _Law(0.002, [(0.0, 0.0), (0.0, 0.0), (0.0, 1.0)]),
+    ]
+    w = np.array([law.weight for law in laws])
+    assert law_goal(laws, []) == pytest.approx(np.sum(w**2))  # no pull: today's weights
+    # candidate 0 tells nothing apart; 1 the heavy laws; 2 the light one from the rest
+    assert law_goal(laws, [0]) == pytest.approx(law_goal(laws, []))
+    assert law_values(laws, [1])[1] > 0.99 and law_values(laws, [2])[2] > 0.99
+    assert law_goal(laws, [1]) > 0.99 > law_goal(laws, [2])
+    batch, values, _ = greedy("laws", laws, 1)
+    assert batch == [1] and int(np.argmin(law_values(laws, [1]))) == 2
+    assert values == pytest.approx([np.sum(w**2), law_goal(laws, [1])])

@@ -151,3 +151,71 @@ def test_partial_of_other_settings_refused(small, tmp_path):
     with pytest.raises(IdtoolError, match="other settings"):
         _run(small, None, out, 2)
     assert np.array_equal(sorted(p.name for p in partial.iterdir()), ["study.json"])
+
+
+def test_a_laws_plan_is_scored_by_the_weights_it_moves(small):
+    """A task of a plan for the goal ``laws`` fits the existing pulls alone too (the
+    first ``before`` traces of the same simulated bench): its record carries each law's
+    weight before, and the summary counts the truths whose law gained weight."""
+    from idtool._data._select import first_traces
+    from idtool._study._study import _base_params, _rig
+    from idtool._study._summary import summarise
+    from idtool._study._task import run_task
+    from idtool._study._truths import draw_truths
+
+    fit = small
+    data = fit.model.data
+    on_s = np.asarray(data.on_end_s) - np.asarray(data.on_start_s)
+    points = [
+        [float(x) for x in row]
+        for row in zip(
+            data.normal_load_n, data.amplitude_fraction, data.pull_speed_m_s, on_s, strict=True
+        )
+    ]
+    truth = draw_truths(fit.draws(max_draws=50, seed=0), 1, 0)[0]
+    task = {
+        "task_id": 0,
+        "seed": 11,
+        "truth": truth.to_dict(),
+        "base": _base_params(small_params()),
+        "rig": _rig(fit),
+        "friction_law": fit.model.law.name,
+        "departure": "clean",
+        "points": points,
+        "targets": [[670.0, 0.7, float(data.pull_speed_m_s[0])]],
+        "fit_options": OPTIONS,
+        "sample": False,
+        "before": 6,
+    }
+    record = run_task(task)
+    assert set(record["law_weights_before"]) == set(record["law_weights"])
+    assert record["before_fit_s"] > 0
+    # first_traces keeps the order, and refuses a count it cannot give
+    assert [t.id for t in first_traces(fit.dataset, 6).traces] == [
+        t.id for t in fit.dataset.traces[:6]
+    ]
+    with pytest.raises(ValueError, match="n = 9"):
+        first_traces(fit.dataset, 9)
+
+    # the summary's count, on records whose weights are known
+    def rec(law, before, after):
+        return {
+            "task_id": 0,
+            "truth": {"law": law, "values": {}},
+            "law": max(after, key=after.get),
+            "law_weights": after,
+            "law_weights_before": before,
+            "parameters": {},
+            "targets": [],
+            "fit_s": 1.0,
+            "task_s": 1.0,
+        }
+
+    records = [
+        rec("a", {"a": 0.4, "b": 0.6}, {"a": 0.9, "b": 0.1}),  # rose, now chosen
+        rec("a", {"a": 0.7, "b": 0.3}, {"a": 0.6, "b": 0.4}),  # fell
+        rec("b", {"a": 0.5, "b": 0.5}, {"a": 0.2, "b": 0.8}),  # rose
+    ]
+    laws = summarise(records, {}, 1.0)["laws"]
+    assert (laws["n_before"], laws["rose"], laws["wins_before"], laws["wins"]) == (3, 2, 1, 3)
+    assert laws["truth_weight_mean_before"] == pytest.approx((0.4 + 0.7 + 0.5) / 3)

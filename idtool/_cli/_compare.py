@@ -38,13 +38,9 @@ def _run(args: argparse.Namespace) -> int:
             raise IdtoolError(f"--targets {t:g}: give reductions [%] in (0, 100)")
     if args.draws < 10:
         raise IdtoolError(f"--draws {args.draws}: give at least 10")
-    from idtool._levels._store import is_levels_fit, not_for_tables
-
     for folder in args.fits:
         if not (Path(folder) / FIT_JSON.name).is_file():
             raise IdtoolError(f"{folder}: not a fit folder (no fit.json); run 'idtool fit' first")
-        if is_levels_fit(folder):
-            raise not_for_tables(folder, "idtool compare")
     out = Path(args.out) if args.out else default_out(args.fits)
     refuse_existing(out, args.force)
 
@@ -78,7 +74,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "posterior: Gaussian draws on the fit's covariance, flagged); the amplitude each "
         "needs for the target reductions; FR against amplitude and load with every fit's "
         "band overlaid. Writes compare.html (self-contained), compare.json and the "
-        "figures into --out. Fits from different rigs are refused.",
+        "figures into --out. Fits from different rigs are refused. Fits of friction "
+        "tables (kind: levels) are compared at the conditions every table measured "
+        "(--load and --speed move them): compare.txt, compare.json, fr_by_condition.png.",
     )
     p.add_argument("fits", nargs="+", metavar="FIT", help="fit folders; the first is the reference")
     p.add_argument(

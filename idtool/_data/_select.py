@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from idtool._data._dataset import Dataset
 from idtool._errors import IdtoolError
 
-__all__ = ["select_traces"]
+__all__ = ["first_traces", "select_traces"]
 
 
 def select_traces(dataset: Dataset, patterns: str | Sequence[str]) -> Dataset:
@@ -39,3 +39,11 @@ def select_traces(dataset: Dataset, patterns: str | Sequence[str]) -> Dataset:
     if not kept:
         raise IdtoolError(f"--traces {','.join(patterns)!r} leaves no trace of {dataset.name}")
     return dataclasses.replace(dataset, traces=kept)
+
+
+def first_traces(dataset: Dataset, n: int) -> Dataset:
+    """``dataset`` with its first ``n`` traces only (in the dataset's order). Raises
+    ValueError unless 1 <= ``n`` <= the number of traces."""
+    if not 1 <= n <= len(dataset.traces):
+        raise ValueError(f"n = {n}: {dataset.name} has {len(dataset.traces)} traces")
+    return dataclasses.replace(dataset, traces=tuple(dataset.traces[:n]))

@@ -13,7 +13,12 @@
   divergence of the laws' joint predictive distributions of the new pulls' log levels
   (the expected log Bayes factor for A over B when A is true; Chaloner & Verdinelli
   1995, Statist. Sci. 10, §2.2, plug-in at each law's estimate and sds); the goal's value
-  is the smallest over the laws. Higher is better.
+  is its average over which law is true, by today's weights, ``sum_A w_A E[w_A' | A]``:
+  the expected posterior weight of the true law (the Bayesian expected utility of the
+  pulls with the posterior probability of the truth as utility; Chaloner & Verdinelli
+  §1.4). Higher is better. Not the smallest over the laws: a law kept at weight 0.002
+  then set the goal, and the plan spent its pulls on it (the true law's weight rose with
+  them on fewer simulated truths than with the weighted average's; issue 29).
 """
 
 from __future__ import annotations
@@ -23,7 +28,7 @@ import numpy as np
 from idtool._plan._band import mixture_half_width
 from idtool._plan._linear import LinearLaw
 
-__all__ = ["GOALS", "band_values", "kl_gaussian", "law_values", "parameter_values"]
+__all__ = ["GOALS", "band_values", "kl_gaussian", "law_goal", "law_values", "parameter_values"]
 
 GOALS = ("band", "laws", "parameters")
 
@@ -108,3 +113,11 @@ def law_values(laws: list[LinearLaw], batch: list[int]) -> np.ndarray:
         )
         out[a] = w[a] / np.sum(w * np.exp(-kl))
     return out
+
+
+def law_goal(laws: list[LinearLaw], batch: list[int]) -> float:
+    """The laws goal's value after the pulls ``batch``: the expected posterior weight of
+    the true law, :func:`law_values` averaged over the laws by today's weights
+    (module docstring)."""
+    w = np.array([law.weight for law in laws])
+    return float(np.sum(w * law_values(laws, batch)) / np.sum(w))

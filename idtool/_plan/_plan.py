@@ -61,7 +61,7 @@ class Plan:
     Attributes:
         goal: ``band``, ``laws`` or ``parameters``.
         unit: what the goal's value measures (``FR half-width``, ``relative sd``,
-            ``weight of the true law``).
+            ``expected weight of the true law``).
         target: the goal's target value (half-width [FR], relative sd, weight).
         pulls: the proposed pulls, ranked (:class:`PlannedPull`).
         values: the goal's expected value after 0, 1, ... N of them (linearised).
@@ -338,7 +338,7 @@ def plan_pulls(
         unit={
             "band": "FR half-width",
             "parameters": "relative sd",
-            "laws": "weight of the true law",
+            "laws": "expected weight of the true law",
         }[goal],
         target=float(target),
         pulls=pulls,

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from idtool._plan._goals import band_values, law_values, parameter_values
+from idtool._plan._goals import band_values, law_goal, parameter_values
 from idtool._plan._linear import LinearLaw
 
 __all__ = ["goal_value", "greedy", "uniform_batch", "value_after"]
@@ -31,7 +31,7 @@ def _better(goal: str) -> int:
 def _add(goal: str, laws: list[LinearLaw], c: int) -> None:
     """Add pull ``c`` to every law's model; not for the laws goal, which takes the
     batch's joint predictive from the model before it (:func:`~idtool._plan._goals.
-    law_values`)."""
+    law_goal`)."""
     if goal != "laws":
         for law in laws:
             law.add(c)
@@ -44,7 +44,7 @@ def goal_value(goal: str, laws: list[LinearLaw], next_pull: bool, batch: list[in
         return float(band_values(laws, next_pull, after=False)[0])
     if goal == "parameters":
         return float(parameter_values(laws[0], after=False)[0][0])
-    return float(law_values(laws, batch).min())
+    return law_goal(laws, batch)
 
 
 def _candidate_values(goal: str, laws: list[LinearLaw], next_pull: bool, batch: list[int]):
@@ -54,7 +54,7 @@ def _candidate_values(goal: str, laws: list[LinearLaw], next_pull: bool, batch: 
     if goal == "parameters":
         return parameter_values(laws[0], after=True)[0]
     n_c = laws[0].cand_rows.shape[0]
-    return np.array([law_values(laws, [*batch, c]).min() for c in range(n_c)])
+    return np.array([law_goal(laws, [*batch, c]) for c in range(n_c)])
 
 
 def greedy(

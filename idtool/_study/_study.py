@@ -176,6 +176,7 @@ def study(
     speeds = np.asarray(data.pull_speed_m_s, float)
     on_s = np.asarray(data.on_end_s, float) - np.asarray(data.on_start_s, float)
     points = [list(r) for r in zip(loads, amps, speeds, on_s, strict=True)]
+    n_existing = len(points)
     plan_doc = None
     if plan is not None:
         pulls, plan_doc = plan_pulls_from_folder(plan, uniform)
@@ -185,6 +186,9 @@ def study(
         ]
     points = [[float(x) if np.isfinite(x) else 0.0 for x in row] for row in points]
     targets = targets_of(plan_doc, loads, amps, speeds)
+    # a plan to tell the laws apart is checked by the weights it moves: each task fits the
+    # existing pulls alone too (a second fit a task)
+    before = n_existing if plan_doc is not None and plan_doc.get("goal") == "laws" else 0
     options = dict(fit_options or {})
     if len(fit.coupling_laws) > 1:
         options.setdefault("coupling", "auto")
@@ -253,6 +257,7 @@ def study(
                 "fit_options": options,
                 "sample": bool(sample),
                 "jax_config": dict(jax_config or {}),
+                "before": before,
             }
         )
 

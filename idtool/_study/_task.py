@@ -12,7 +12,10 @@ optionally sampled with the defaults (until converged; minutes a task), then sco
 * the FR band (median, 95% interval, half-width [FR]) at each target and whether the
   true FR (:func:`idtool._simulate._simulate.true_friction_ratio`, without scatter) is
   inside;
-* the chosen coupling law and each law's weight;
+* the chosen coupling law and each law's weight; with ``before`` (a study of a plan for
+  the goal ``laws``) also each law's weight from the fit of the design's existing pulls
+  alone (the same simulated traces without the planned ones): whether the pulls moved
+  the weight towards the truth's law;
 * the seconds each stage took.
 
 A failure raises out of the task; the study records the error text (:mod:`idtool.
@@ -31,7 +34,16 @@ import numpy as np
 __all__ = ["RANK_DRAWS", "TIMING_KEYS", "run_task"]
 
 RANK_DRAWS = 99  # draws the truth is ranked among: ranks 0..99, 100 equally likely values
-TIMING_KEYS = ("simulate_s", "fit_s", "sample_s", "predict_s", "task_s", "worker", "finished_s")
+TIMING_KEYS = (
+    "simulate_s",
+    "fit_s",
+    "before_fit_s",
+    "sample_s",
+    "predict_s",
+    "task_s",
+    "worker",
+    "finished_s",
+)
 
 
 def _configure(jax_config: dict[str, Any]) -> None:
@@ -50,7 +62,8 @@ def run_task(task: dict[str, Any]) -> dict[str, Any]:
     ``task`` holds ``task_id``, ``seed``, ``truth`` (:meth:`~idtool._study._truths.Truth.
     to_dict`), ``base`` (a simulator document), ``rig``, ``friction_law``, ``departure``,
     ``points`` (rows load [N], amplitude, speed [m/s], ON [s]), ``targets`` (load [N],
-    amplitude, speed [m/s]), ``fit_options``, ``sample`` and ``jax_config``.
+    amplitude, speed [m/s]), ``fit_options``, ``sample``, ``jax_config`` and ``before``
+    (0, or the number of existing pulls, the first of ``points``, to fit alone too).
     """
     import os
     import socket
@@ -89,6 +102,12 @@ def run_task(task: dict[str, Any]) -> dict[str, Any]:
         },
         "warnings": sorted({getattr(w, "code", str(w)) for w in fit.warnings}),
     }
+    if task.get("before"):
+        record["law_weights_before"] = _law_weights_before(
+            dataset, int(task["before"]), task.get("fit_options", {})
+        )
+        record["before_fit_s"] = time.perf_counter() - t2
+        t2 = time.perf_counter()
     record["sampled"] = False
     if task.get("sample"):
         with warnings.catch_warnings():
@@ -107,6 +126,22 @@ def run_task(task: dict[str, Any]) -> dict[str, Any]:
     record["task_s"] = time.perf_counter() - started
     record["worker"] = f"{socket.gethostname()}:{os.getpid()}"
     return record
+
+
+def _law_weights_before(dataset, n_existing: int, fit_options: dict) -> dict[str, float]:
+    """Each coupling law's weight from the defaults' fit of ``dataset``'s first
+    ``n_existing`` traces (the design's existing pulls, simulated with the same seed as
+    the whole: the planned pulls' traces follow them)."""
+    from idtool._data._select import first_traces
+    from idtool._fit._run import fit_dataset
+    from idtool._workflow import Fit
+
+    existing = first_traces(dataset, n_existing)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = fit_dataset(existing, seed=0, **fit_options)
+    fit = Fit.from_run(existing, run)
+    return {name: float(doc["bic_weight"]) for name, doc in fit.coupling_laws.items()}
 
 
 def _parameters(fit, draws, truth) -> dict[str, dict[str, Any]]:
