@@ -175,3 +175,14 @@ def test_laws_goal_is_the_expected_weight_of_the_true_law():
     batch, values, _ = greedy("laws", laws, 1)
     assert batch == [1] and int(np.argmin(law_values(laws, [1]))) == 2
     assert values == pytest.approx([np.sum(w**2), law_goal(laws, [1])])
+
+
+def test_laws_goal_plans_over_the_horns_commanded_range_by_default():
+    """The laws part where a bench did not test: the laws goal's candidates span the
+    horn's commanded amplitudes unless given; the other goals keep the tested range."""
+    from idtool._plan._plan import LAWS_AMPLITUDES, amplitude_limits
+
+    tested = np.array([0.5, 0.7, 0.5])
+    assert amplitude_limits("laws", None, tested) == LAWS_AMPLITUDES == (0.1, 1.0)
+    assert amplitude_limits("band", None, tested) == (0.5, 0.7)
+    assert amplitude_limits("laws", (0.3, 0.9), tested) == (0.3, 0.9)

@@ -215,7 +215,9 @@ def test_a_laws_plan_is_scored_by_the_weights_it_moves(small):
         rec("a", {"a": 0.4, "b": 0.6}, {"a": 0.9, "b": 0.1}),  # rose, now chosen
         rec("a", {"a": 0.7, "b": 0.3}, {"a": 0.6, "b": 0.4}),  # fell
         rec("b", {"a": 0.5, "b": 0.5}, {"a": 0.2, "b": 0.8}),  # rose
+        rec("b", {"a": 0.02, "b": 0.98}, {"a": 0.03, "b": 0.97}),  # fell, but held >= 0.95
     ]
     laws = summarise(records, {}, 1.0)["laws"]
-    assert (laws["n_before"], laws["rose"], laws["wins_before"], laws["wins"]) == (3, 2, 1, 3)
-    assert laws["truth_weight_mean_before"] == pytest.approx((0.4 + 0.7 + 0.5) / 3)
+    assert (laws["n_before"], laws["rose"], laws["held"]) == (4, 2, 3)
+    assert (laws["wins_before"], laws["wins"]) == (2, 4)
+    assert laws["truth_weight_mean_before"] == pytest.approx((0.4 + 0.7 + 0.5 + 0.98) / 4)

@@ -178,7 +178,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="band goal: the next pull's band (scatter added), not the mean FR's",
     )
     p.add_argument("--loads", help="load limits LOW:HIGH [N] (default: the tested range)")
-    p.add_argument("--amplitudes", help="amplitude limits LOW:HIGH (default: the tested range)")
+    p.add_argument(
+        "--amplitudes",
+        help="amplitude limits LOW:HIGH (default: the tested range; --goal laws: 0.1:1)",
+    )
     p.add_argument("--speeds", type=number_list, help="pull speeds [m/s] (default: the fit's)")
     p.add_argument("--on-time", type=float, help="ON time [s] (default: the most common)")
     p.add_argument("--grid", default="10x10", help="candidate levels LOADSxAMPLITUDES (10x10)")

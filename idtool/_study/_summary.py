@@ -26,6 +26,7 @@ import numpy as np
 __all__ = ["plot_study", "summarise", "summary_text"]
 
 RANK_BINS = (10, 5, 4, 2)  # divide the 100 possible ranks evenly
+CERTAIN = 0.95  # a weight that meets the laws goal (its default target, --weight 0.95): held
 
 
 def _coverage(flags: list[bool], rate: float = 0.95) -> dict[str, Any]:
@@ -123,8 +124,9 @@ def summarise(records: list[dict], expected: dict[str, Any], wall_s: float) -> d
 
 def _weights_moved(known: list[dict]) -> dict[str, Any]:
     """With the existing pulls' fit in the records (a plan for the goal ``laws``): in how
-    many the true law's weight rose with the planned pulls (``rose`` of ``n_before``),
-    its mean weight before, and the truth's law chosen before."""
+    many the true law's weight rose with the planned pulls (``rose`` of ``n_before``);
+    in how many it rose or stayed at least :data:`CERTAIN` (``held``: a weight of 1.0
+    before cannot rise); its mean weight before, and the truth's law chosen before."""
     pairs = [r for r in known if r["truth"]["law"] in r.get("law_weights_before", {})]
     if not pairs:
         return {}
@@ -134,7 +136,8 @@ def _weights_moved(known: list[dict]) -> dict[str, Any]:
     return {
         "n_before": len(pairs),
         "rose": int(np.sum(after > before)),
-        "rose_coverage": _coverage(list(after > before), 0.8),
+        "held": int(np.sum((after > before) | ((before >= CERTAIN) & (after >= CERTAIN)))),
+        "rose_rate": _coverage(list(after > before), 0.8),
         "truth_weight_mean_before": float(before.mean()),
         "wins_before": int(sum(c == r["truth"]["law"] for c, r in zip(chosen, pairs, strict=True))),
     }
@@ -194,7 +197,8 @@ def summary_text(s: dict) -> str:
     if law.get("n_before"):
         lines.append(
             f"  with the planned pulls the true law's weight rose in {law['rose']}/"
-            f"{law['n_before']}; without them (the existing pulls' fit) it was chosen in "
+            f"{law['n_before']} (rose or stayed >= {CERTAIN}: {law['held']}/{law['n_before']}); "
+            "without them (the existing pulls' fit) it was chosen in "
             f"{law['wins_before']}/{law['n_before']}, mean weight "
             f"{law['truth_weight_mean_before']:.3g}"
         )
