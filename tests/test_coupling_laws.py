@@ -248,3 +248,24 @@ def test_a_saved_fit_keeps_the_laws_it_averages(comparable):
     assert set(back.artefact.alternates) == others
     a, b = fit.predict(60.0, 0.5)[0], back.predict(60.0, 0.5)[0]
     assert (a.median, a.ci95, a.by_law) == (b.median, b.ci95, b.by_law)
+
+
+def test_a_law_starts_from_each_law_it_nests():
+    """With --coupling auto each law is also started from the optimum of every law fitted
+    before whose parameters are a subset of its own (the load-power law from the power
+    limit's: a load-power truth at Kt 1.9e10 N/m was fitted at Kt's bound, BIC 13,182,
+    against 7,425 from the power limit's optimum, and lost to the exponential law at
+    BIC weight 1.0)."""
+    from idtool._fit._run import nested_couplings, nesting_order
+
+    every = idtool.COUPLINGS.names()
+    order = nesting_order(every)  # each law after those it nests
+    for law in every:
+        assert all(order.index(n) < order.index(law) for n in nested_couplings(law, every))
+    assert nested_couplings("load-power", every) == ["constant", "power-limited"]
+    assert nested_couplings("power-limited", every) == ["constant"]
+    assert nested_couplings("exponential", every) == ["constant"]
+    assert nested_couplings("constant", every) == []
+    # the nested law's parameter where the richer one reduces to it
+    exponent = {p.name: p for p in idtool.COUPLINGS.get("load-power").fit_params}
+    assert exponent["load_exponent"].nested_at == 0.0
