@@ -11,6 +11,7 @@ import os
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from idtool._data._dataset import Dataset, load_dataset
 from idtool._data._select import select_traces
@@ -18,14 +19,15 @@ from idtool._errors import IdtoolError
 from idtool._fit._parameter_table import parse_fix, read_parameter_table
 from idtool._fit._run import fit_dataset
 from idtool._fit._store import load_artefact
-from idtool._levels._compare import TableComparison, compare_tables
-from idtool._levels._result import LevelsFit
-from idtool._levels._store import is_levels_fit, load_levels_fit
 from idtool._model._names import BY_DESIGN, DEFAULT_DIRECTION
 from idtool._model._noise import DEFAULT_NOISE
 from idtool._model._settings import ParameterSetting
 from idtool._report._compare import TARGETS, Comparison, compare, compare_request
 from idtool._workflow import Fit
+
+if TYPE_CHECKING:
+    from idtool._levels._compare import TableComparison
+    from idtool._levels._result import LevelsFit
 
 __all__ = ["compare_fits", "fit", "load_fit"]
 
@@ -174,6 +176,12 @@ def compare_fits(
     are compared at the conditions every table measured (:func:`~idtool._levels.
     _compare.compare_tables`; ``load_n`` and ``speed_m_s`` replace the tables' loads or
     speeds; ``amplitude`` and ``targets`` do not apply): a :class:`TableComparison`."""
+    # the table kind's modules load here, not with this one: they import SciPy's
+    # optimisers and scipy.special, which a fit's import path leaves to its background
+    # thread (tests/test_cli_model.py)
+    from idtool._levels._result import LevelsFit
+    from idtool._levels._store import is_levels_fit
+
     tables = [
         isinstance(f, LevelsFit) or (not isinstance(f, Fit) and is_levels_fit(Path(f)))
         for f in fits
@@ -197,6 +205,10 @@ def compare_fits(
 
 def _compare_tables(fits, tables, load_n, amplitude, speed_m_s, targets, max_draws, seed):
     """:func:`compare_fits` of table fits: every one a table's, no trace-only option."""
+    from idtool._levels._compare import compare_tables
+    from idtool._levels._result import LevelsFit
+    from idtool._levels._store import load_levels_fit
+
     if not all(tables):
         raise IdtoolError(
             "compare fits of one kind: "
