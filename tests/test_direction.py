@@ -294,7 +294,7 @@ def test_gradients_are_finite_and_match_central_differences(direction):
 
 
 # ------------------------------------------------------------------ the default
-def test_default_along_is_bit_for_bit_what_it_was():
+def test_default_along_is_what_it_was():
     # values of on_friction_ratio at commit 29d241e (main, before the direction choice)
     c = PowerLimitedCoupling(gain=0.02, power_load_n=800.0)
     laws = [
@@ -307,9 +307,14 @@ def test_default_along_is_bit_for_bit_what_it_was():
     along = idtool.DIRECTIONS.get("along")
     for law, (n, alpha, speed), hexed in zip(laws, points, before, strict=True):
         fr = float(on_friction_ratio(law, c, n, alpha, speed, 20e3, 85e-6))
-        assert fr.hex() == hexed
+        # recorded on one CPU: XLA's elementary functions (its own vectorised
+        # approximations, a few ulps each) give other last bits on another (an AMD EPYC:
+        # 1 ulp on Dahl's, 5 on Coulomb's). Within 1e-14 relative (~45 ulps: the chain's
+        # dozen functions, each a few ulps); a changed term or constant moves it by far more
+        assert fr == pytest.approx(float.fromhex(hexed), rel=1e-14, abs=0)
+        # and the explicit default is the implicit one, bit for bit on this machine
         chosen = on_friction_ratio(law, c, n, alpha, speed, 20e3, 85e-6, along)
-        assert float(chosen).hex() == hexed
+        assert float(chosen).hex() == fr.hex()
     assert ModelSpec("dahl", "constant", "ar1", "slope", "constant", "steady").direction == (
         "along"
     )

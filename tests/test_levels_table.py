@@ -226,7 +226,9 @@ def test_published_summary_fits_says_two_points_cannot_pin_the_coupling_and_pred
     assert fit.estimates["power_load_n"].one_sided  # the table does not bound it
     speeds = np.array([0.01, 0.0203, 0.05, 0.087, 0.15])
     p = fit.predict(10.0, speeds, amplitude_m=5e-6)
-    assert p.pinned.all() and np.all(np.diff(p.fr) >= 0)  # less reduction as speed rises
+    # less reduction as speed rises; above the critical speed FR is 1 up to rounding (a
+    # step of -4.9e-15 between the two last points seen on an AMD EPYC)
+    assert p.pinned.all() and np.all(np.diff(p.fr) >= -1e-12)
     assert np.all(p.mean_band[0] <= p.fr) and np.all(p.fr <= p.mean_band[1])
     assert p.fr[1] == pytest.approx(0.38, abs=0.03)
     # another load or amplitude moves along what the table does not inform: no band
