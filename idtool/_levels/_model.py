@@ -21,9 +21,11 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array
 
 from idtool._data._levels import LevelsTable
 from idtool._errors import IdtoolError
@@ -34,9 +36,83 @@ from idtool._model._laws import FRICTION_LAWS, MU
 from idtool._model._names import DEFAULT_COUPLING, DEFAULT_DIRECTION
 from idtool._model._params import Param
 
-__all__ = ["DEFAULT_LAW", "LevelsModel", "levels_model"]
+__all__ = [
+    "DEFAULT_LAW",
+    "LevelsData",
+    "LevelsModel",
+    "LevelsSpec",
+    "fr_points",
+    "levels_model",
+    "log_levels",
+]
 
 DEFAULT_LAW = "dahl"  # as idtool.fit's
+
+
+@dataclasses.dataclass(frozen=True)
+class LevelsSpec:
+    """The registered classes of a table's model: the static part of its compiled
+    programs, equal by value, so tables of one shape and model share them."""
+
+    law: Any
+    coupling: Any
+    direction: Any
+
+    @property
+    def params(self) -> tuple[Param, ...]:
+        return (*self.law.fit_params, MU, *self.coupling.fit_params)
+
+
+class LevelsData(eqx.Module):
+    """A table's numbers the programs read, as arguments (not constants compiled in):
+    per condition ``n`` [N], ``alpha`` (fraction of ``a_ref``), ``v`` [m/s], ``f`` [Hz];
+    per row ``row_n`` [N], ``row_v`` [m/s] and ``gather`` (its condition);
+    ``a_ref`` [m]; ``coefficient`` 1.0 where the table gives friction coefficients."""
+
+    n: Array
+    alpha: Array
+    v: Array
+    f: Array
+    row_n: Array
+    row_v: Array
+    gather: Array
+    a_ref: Array
+    coefficient: Array
+
+
+def _values(spec: LevelsSpec, theta) -> dict[str, Any]:
+    return {p.name: p.value(theta[i]) for i, p in enumerate(spec.params)}
+
+
+def fr_points(spec: LevelsSpec, a_ref, theta, n, alpha, v, f):
+    """FR at points ``(n [N], alpha, v [m/s], f [Hz])`` (arrays of one shape)."""
+    vals = _values(spec, theta)
+    cpl = spec.coupling.from_values(vals)
+
+    def one(n1, a1, v1, f1):
+        law_n = spec.law.at_load(vals, n1)
+        return on_friction_ratio(law_n, cpl, n1, a1, v1, f1, a_ref, spec.direction)
+
+    shape = jnp.shape(n)
+    flat = [jnp.ravel(jnp.asarray(x, float)) for x in (n, alpha, v, f)]
+    return jax.vmap(one)(*flat).reshape(shape)
+
+
+def log_levels(spec: LevelsSpec, data: LevelsData, theta):
+    """Log OFF of every row, then log FR (2 n,): the module docstring's equations."""
+    vals = _values(spec, theta)
+    off = jax.vmap(lambda n, v: spec.law.at_load(vals, n).off_force_n(v))(data.row_n, data.row_v)
+    log_off = jnp.log(off) - data.coefficient * jnp.log(data.row_n)
+    fr = fr_points(spec, data.a_ref, theta, data.n, data.alpha, data.v, data.f)[data.gather]
+    return jnp.concatenate([log_off, jnp.log(fr)])
+
+
+# compiled once per model and shape, for every table (they were closures over each
+# table's numbers: a new program for every table and every fit of one; 2.3 of a 4.3 s
+# table fit, and 5 sampler programs in one test, tests/test_levels_sample.py)
+_log_levels = jax.jit(log_levels, static_argnums=0)
+_jacobian = jax.jit(jax.jacfwd(log_levels, argnums=2), static_argnums=0)
+_fr_at = jax.jit(fr_points, static_argnums=0)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -45,26 +121,46 @@ class LevelsModel:
 
     Attributes:
         table: the data.
-        law, coupling, direction: registered names.
-        params: the physical parameters, in ``theta``'s order.
-        log_levels: ``theta -> (2 n,)``: log OFF of every row, then log FR (jitted).
-        jacobian: ``theta -> (2 n, k)`` (forward mode, jitted).
-        fr_at: ``(theta, load_n, alpha, speed_m_s, frequency_hz) -> FR`` at any points
-            (arrays of one shape; jitted).
+        spec: the registered law, coupling law and direction.
+        data: the table's numbers, as the programs read them.
     """
 
     table: LevelsTable
-    law: str
-    coupling: str
-    direction: str
-    params: tuple[Param, ...]
-    log_levels: Any
-    jacobian: Any
-    fr_at: Any
+    spec: LevelsSpec
+    data: LevelsData
+
+    @property
+    def law(self) -> str:
+        return self.spec.law.name
+
+    @property
+    def coupling(self) -> str:
+        return self.spec.coupling.name
+
+    @property
+    def direction(self) -> str:
+        return self.spec.direction.name
+
+    @property
+    def params(self) -> tuple[Param, ...]:
+        """The physical parameters, in ``theta``'s order."""
+        return self.spec.params
 
     @property
     def names(self) -> tuple[str, ...]:
         return tuple(p.name for p in self.params)
+
+    def log_levels(self, theta) -> Array:
+        """``theta -> (2 n,)``: log OFF of every row, then log FR (compiled)."""
+        return _log_levels(self.spec, self.data, theta)
+
+    def jacobian(self, theta) -> Array:
+        """``theta -> (2 n, k)``: :meth:`log_levels`' Jacobian (forward mode, compiled)."""
+        return _jacobian(self.spec, self.data, theta)
+
+    def fr_at(self, theta, load_n, alpha, speed_m_s, frequency_hz) -> Array:
+        """FR at any points (arrays of one shape; compiled)."""
+        return _fr_at(self.spec, self.data.a_ref, theta, load_n, alpha, speed_m_s, frequency_hz)
 
     def values(self, theta) -> dict[str, Any]:
         """Physical values by name from internal ``theta``."""
@@ -95,49 +191,17 @@ def levels_model(
             f"the {coupling} coupling law models the horn's transducer, which a friction "
             "table does not describe: choose another coupling law"
         )
-    params = (*law_cls.fit_params, MU, *coupling_cls.fit_params)
-    a_ref = table.reference_amplitude_m
-    coefficient = table.friction == "coefficient"
     index, first = table.operating_points
-    op = {
-        "n": jnp.asarray(table.normal_load_n[first]),
-        "alpha": jnp.asarray(table.alpha[first]),
-        "v": jnp.asarray(table.sliding_speed_m_s[first]),
-        "f": jnp.asarray(table.vibration_frequency_hz[first]),
-    }
-    row_n = jnp.asarray(table.normal_load_n)
-    row_v = jnp.asarray(table.sliding_speed_m_s)
-    gather = jnp.asarray(index)
-
-    def values(theta):
-        return {p.name: p.value(theta[i]) for i, p in enumerate(params)}
-
-    def fr_points(theta, n, alpha, v, f):
-        vals = values(theta)
-        cpl = coupling_cls.from_values(vals)
-
-        def one(n1, a1, v1, f1):
-            law_n = law_cls.at_load(vals, n1)
-            return on_friction_ratio(law_n, cpl, n1, a1, v1, f1, a_ref, direction_cls)
-
-        shape = jnp.shape(n)
-        flat = [jnp.ravel(jnp.asarray(x, float)) for x in (n, alpha, v, f)]
-        return jax.vmap(one)(*flat).reshape(shape)
-
-    def log_levels(theta):
-        vals = values(theta)
-        off = jax.vmap(lambda n, v: law_cls.at_load(vals, n).off_force_n(v))(row_n, row_v)
-        log_off = jnp.log(off) - (jnp.log(row_n) if coefficient else 0.0)
-        fr = fr_points(theta, op["n"], op["alpha"], op["v"], op["f"])[gather]
-        return jnp.concatenate([log_off, jnp.log(fr)])
-
-    return LevelsModel(
-        table=table,
-        law=law_cls.name,
-        coupling=coupling_cls.name,
-        direction=direction_cls.name,
-        params=params,
-        log_levels=jax.jit(log_levels),
-        jacobian=jax.jit(jax.jacfwd(log_levels)),
-        fr_at=jax.jit(fr_points),
+    data = LevelsData(
+        n=jnp.asarray(table.normal_load_n[first], float),
+        alpha=jnp.asarray(table.alpha[first], float),
+        v=jnp.asarray(table.sliding_speed_m_s[first], float),
+        f=jnp.asarray(table.vibration_frequency_hz[first], float),
+        row_n=jnp.asarray(table.normal_load_n, float),
+        row_v=jnp.asarray(table.sliding_speed_m_s, float),
+        gather=jnp.asarray(index),
+        a_ref=jnp.asarray(table.reference_amplitude_m, float),
+        coefficient=jnp.asarray(1.0 if table.friction == "coefficient" else 0.0),
     )
+    spec = LevelsSpec(law_cls, coupling_cls, direction_cls)
+    return LevelsModel(table=table, spec=spec, data=data)

@@ -82,7 +82,7 @@ from idtool._errors import IdtoolError
 from idtool._fit._variability import SD_PARAMS
 from idtool._lawfit._profile import Side
 from idtool._levels._estimate import SD_NAMES, Optimum, _data
-from idtool._levels._model import LevelsModel
+from idtool._levels._model import LevelsData, LevelsModel, LevelsSpec, log_levels
 from idtool._levels._moves import table_moves
 from idtool._model._params import Param
 from idtool._posterior._box import BoxTarget, base_internal, ridge_in_box
@@ -109,14 +109,18 @@ class TableTarget(eqx.Module):
     y: Array  # (2 n,) log OFF, then log FR, of every row
     m: Array  # (2 n, 2 n) the measurement variance from the standard errors
     k: Array  # (n, n) 1 between rows of one condition
-    model: LevelsModel = eqx.field(static=True)
+    # the table's numbers as leaves and its classes as the static part: one compiled
+    # program for every table of one shape and model (the model itself, static, was one
+    # per fit: five in tests/test_levels_sample.py's resumed chains)
+    data: LevelsData
+    spec: LevelsSpec = eqx.field(static=True)
     priors: tuple[Prior, ...] = eqx.field(static=True)
     sd_names: tuple[str, ...] = eqx.field(static=True)
 
     @property
     def params(self) -> tuple[Param, ...]:
         by_name = {p.name: p for p in SD_PARAMS}
-        return (*self.model.params, *(by_name[n] for n in self.sd_names))
+        return (*self.spec.params, *(by_name[n] for n in self.sd_names))
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -129,8 +133,9 @@ class TableTarget(eqx.Module):
         for i, (p, prior) in enumerate(zip(self.params, self.priors, strict=True)):
             v[p.name] = p.value(theta[:, i])
             lp = lp + prior.logpdf(v[p.name]) + p.log_jacobian(theta[:, i])
-        kp = len(self.model.params)
-        g = jax.vmap(self.model.log_levels)(theta[:, :kp])  # (walkers, 2 n)
+        kp = len(self.spec.params)
+        # (walkers, 2 n)
+        g = jax.vmap(lambda th: log_levels(self.spec, self.data, th))(theta[:, :kp])
         n = self.k.shape[0]
         zero = jnp.zeros(theta.shape[0])
         tau2 = [v.get(name, zero) ** 2 for name in SD_NAMES]
@@ -159,7 +164,8 @@ def table_target(model: LevelsModel, opt: Optimum, priors: dict[str, Prior]) -> 
         y=jnp.asarray(y),
         m=jnp.asarray(m),
         k=jnp.asarray(k[:n, :n]),
-        model=model,
+        data=model.data,
+        spec=model.spec,
         priors=tuple(priors[name] for name in names),
         sd_names=sd_names,
     )
