@@ -180,59 +180,73 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "the small design": ("tests/test_arviz.py", "tests/test_predict.py", "tests/test_sample.py"),
 }
 SPLIT_BY_PARAMETER = ("tests/test_notebooks.py",)
-# Seconds a file takes (a split file's total; or a unit's own, by its name), measured
-# with --durations in a full run on two busy cores (2026-11-24, about 3.5 times the
-# uncontended time), after this file's changes where they changed it. Only the order
-# depends on them: a stale figure costs balance, never a test; a file not listed is
-# taken as light, and goes last.
+# Seconds a file takes (a split file's part by its parameter), its tests' setup and call
+# as --junitxml totals them, in a full run on two busy cores (2026-11-27, an AMD EPYC whose
+# run took 35.6 min: about 2.8 times the machine of the figures before); the levels
+# files' estimated after their programs were shared. Only the order depends on them: a
+# stale figure costs balance, never a test; a file not listed is taken as light, and
+# goes last.
 FILE_SECONDS: dict[str, float] = {
-    "tests/test_api.py": 645,
-    "tests/test_compare.py": 335,  # 2026-11-26: two compares --no-figures, 87.8 -> 64.3 CPU s
-    "tests/test_coverage.py": 370,
-    "tests/test_notebooks.py[02_fit_new_material]": 155,  # 94.5 -> 51.2 CPU s (5 fits)
-    # 2026-11-27: in the group of the paper's matrix, in-process: 33 -> 13 CPU s
-    "tests/test_notebooks.py[03_uncertainty_design_maps]": 45,
-    "tests/test_notebooks.py[01_seed_model]": 125,
-    "tests/test_sample_until_converged.py": 270,  # the example's fit: the bank's
-    "tests/test_coupling_sdof.py": 215,  # 2026-11-26: 154.9 -> ~124 CPU s (D = 0 once, jit)
-    "tests/test_coupling_laws.py": 250,  # 2026-11-26: 164.8 -> 141.8 CPU s
-    "tests/test_transducer.py": 190,  # 2026-11-26: two programs fewer, 90.3 -> 68.9 CPU s
-    "tests/test_sample.py": 200,
-    "tests/test_parameter_settings.py": 190,
-    "tests/test_variability.py": 150,  # the example's fit: the bank's
-    "tests/test_plateau_drift.py": 150,  # 2026-11-25: a creep test 15.0 -> 12.0 CPU s
-    "tests/test_speed_design.py": 150,
-    "tests/test_coverage_fading.py": 120,
-    "tests/test_relaxing_on.py": 100,
-    "tests/test_arviz.py": 150,
-    "tests/test_report.py": 120,
-    "tests/test_fit.py": 80,  # 2026-11-25: the single-load test 23.7 -> 9.8 CPU s
-    "tests/test_validate_fit.py": 100,
-    "tests/test_lm.py": 90,
-    "tests/test_arrowhead.py": 80,
-    "tests/test_offset.py": 75,
-    "tests/test_cli_model.py": 65,
-    "tests/test_coupling_load_power.py": 55,
-    "tests/test_predict.py": 40,
-    "tests/test_study.py": 40,  # 2026-11-27: 37 s wall on its own (a 2-worker Dask cluster)
-    "tests/test_priors.py": 35,
-    "tests/test_table_fast.py": 35,
-    "tests/test_mains.py": 20,
-    "tests/test_departures.py": 20,
-    "tests/test_actuator.py": 15,
-    "tests/test_simulate.py": 15,
-    "tests/test_contact.py": 15,
-    "tests/test_import.py": 15,
-    # files new since: CPU seconds (user + sys) of a run alone (2026-11-25) times 3, the
-    # ratio of this table's test_api and test_sample_until_converged (945) to their CPU
-    # seconds (318)
-    "tests/test_artefact.py": 250,  # 83 CPU s: every coupling law and the levels model
-    "tests/test_validate_cli.py": 18,
-    "tests/test_compiled.py": 15,
-    "tests/test_dataset.py": 14,
-    "tests/test_diagnostic.py": 7,
-    "tests/test_ridge_jump.py": 120,  # 2026-11-26: three 32 x 4000 chains on a 2-D target
-    "tests/test_levels_compare.py": 90,  # 2026-11-27: three 54-row table fits, 4 compares
+    "tests/test_coupling_sdof.py": 302,
+    "tests/test_coupling_laws.py": 238,
+    "tests/test_coverage.py": 216,
+    "tests/test_sample.py": 192,
+    "tests/test_levels_sample.py": 190,
+    "tests/test_api.py": 183,
+    "tests/test_variability.py": 180,
+    "tests/test_fit.py": 151,
+    "tests/test_artefact.py": 140,
+    "tests/test_compare.py": 139,
+    "tests/test_plateau_drift.py": 133,
+    "tests/test_transducer.py": 132,
+    "tests/test_arviz.py": 120,
+    "tests/test_fit_law.py": 113,
+    "tests/test_relaxing_on.py": 107,
+    "tests/test_report.py": 104,
+    "tests/test_lm.py": 84,
+    "tests/test_levels_compare.py": 80,
+    "tests/test_sample_until_converged.py": 77,
+    "tests/test_notebooks.py[02_fit_new_material]": 76,
+    "tests/test_direction_auto.py": 75,
+    "tests/test_coverage_fading.py": 74,
+    "tests/test_cli_model.py": 73,
+    "tests/test_levels_choice.py": 70,
+    "tests/test_speed_design.py": 63,
+    "tests/test_plan.py": 62,
+    "tests/test_sd_conditional.py": 59,
+    "tests/test_notebooks.py[03_uncertainty_design_maps]": 56,
+    "tests/test_direction.py": 52,
+    "tests/test_study.py": 51,
+    "tests/test_notebooks.py[01_seed_model]": 50,
+    "tests/test_arrowhead.py": 38,
+    "tests/test_parameter_settings.py": 36,
+    "tests/test_levels_table.py": 35,
+    "tests/test_ridge_jump.py": 35,
+    "tests/test_predict.py": 34,
+    "tests/test_cov_blocks.py": 31,
+    "tests/test_coupling_load_power.py": 26,
+    "tests/test_validate_fit.py": 26,
+    "tests/test_toy_parts.py": 24,
+    "tests/test_table_fast.py": 24,
+    "tests/test_contact.py": 19,
+    "tests/test_off_corner.py": 19,
+    "tests/test_toy_noise.py": 18,
+    "tests/test_priors.py": 17,
+    "tests/test_mains.py": 15,
+    "tests/test_actuator.py": 13,
+    "tests/test_ridge.py": 11,
+    "tests/test_box.py": 11,
+    "tests/test_reml_rows.py": 8,
+    "tests/test_import.py": 8,
+    "tests/test_xla_pool.py": 8,
+    "tests/test_departures.py": 7,
+    "tests/test_offset.py": 7,
+    "tests/test_simulate.py": 7,
+    "tests/test_validate_cli.py": 7,
+    "tests/test_funnel.py": 6,
+    "tests/test_dataset.py": 5,
+    "tests/test_simulator_schema.py": 5,
+    "tests/test_compiled.py": 4,
 }
 _GROUP_OF = {path: name for name, paths in GROUPS.items() for path in paths}
 

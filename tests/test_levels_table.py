@@ -129,10 +129,17 @@ def test_import_round_trip_in_si_and_refuses_to_overwrite(tmp_path):
 
 # ------------------------------------------------------------------ recovery
 def simulate_table(
-    seed: int, *, scatter_fr=0.03, discrepancy=0.02, scatter_mu=0.02, truth=None, name=None
+    seed: int,
+    *,
+    scatter_fr=0.03,
+    discrepancy=0.02,
+    scatter_mu=0.02,
+    truth=None,
+    name=None,
+    direction="along",
 ):
     """3 loads x 3 amplitudes x 2 speeds x 3 repeats at ``truth`` (default :data:`TRUTH`;
-    Dahl, the power limit, vibration along the sliding: the defaults), FR from the public
+    Dahl, the power limit, vibration along the sliding or ``direction``), FR from the public
     :func:`idtool.on_friction_ratio`; log-normal pull-to-pull scatter per row and a
     discrepancy per condition."""
     truth = TRUTH if truth is None else truth
@@ -148,7 +155,14 @@ def simulate_table(
         [
             float(
                 idtool.on_friction_ratio(
-                    idtool.Dahl.at_load(truth, n), coupling, n, a / 6e-6, v, 22e3, 6e-6
+                    idtool.Dahl.at_load(truth, n),
+                    coupling,
+                    n,
+                    a / 6e-6,
+                    v,
+                    22e3,
+                    6e-6,
+                    idtool.DIRECTIONS.get(direction),
                 )
             )
             for n, a, v in grid

@@ -78,10 +78,6 @@ def _run_levels(args: argparse.Namespace, started: float) -> int:
         for name in ("noise", "actuator", "offset", "level", "traces", "parameters", "fix")
         if getattr(args, name, None) not in (None, "auto", DEFAULT_NOISE, False)
     ]
-    if args.coupling == "auto":
-        unused.append("--coupling auto")
-    if args.direction == "auto":
-        unused.append("--direction auto")
     if unused:
         raise IdtoolError(
             f"{args.dataset} is a friction table (kind: levels): {', '.join(unused)} "

@@ -48,7 +48,9 @@ def profile_intervals(lm, opt: Optimum, n_physical: int) -> list[tuple[Side, Sid
     se = np.sqrt(np.diag(opt.cov_z))[:n_physical]
     idx = np.repeat(np.arange(n_physical), 2)
     sign = np.tile([-1.0, 1.0], n_physical)
-    centre = opt.z[idx]
+    # an optimum beyond the range's edge is at its bound: walked from there, not from a
+    # far-off internal value the bisections cannot cross (idtool._levels._estimate)
+    centre = np.clip(opt.z[idx], -Z_AT_BOUND, Z_AT_BOUND)
     wald = centre + sign * Z95 * np.where(np.isfinite(se[idx]), se[idx], np.inf)
     beyond = np.abs(wald) >= Z_AT_BOUND
     ends = np.clip(wald, -Z_AT_BOUND, Z_AT_BOUND)

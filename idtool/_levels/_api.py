@@ -3,6 +3,7 @@ public entry point behind ``idtool fit`` on a dataset of kind ``levels``."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -12,6 +13,7 @@ import numpy as np
 from idtool._data._levels import LevelsTable, load_levels
 from idtool._fit._variability import MISFIT, MISSPECIFIED_SD
 from idtool._lawfit._result import estimate_from_sides
+from idtool._levels._choice import AUTO, kept, label, options, rank, table_bic
 from idtool._levels._estimate import estimate, profile_sides
 from idtool._levels._model import DEFAULT_LAW, LevelsModel, levels_model
 from idtool._levels._result import LevelsFit
@@ -20,6 +22,9 @@ from idtool._model._names import DEFAULT_COUPLING, DEFAULT_DIRECTION
 __all__ = ["fit_levels"]
 
 _NULL_LOADING = 0.1  # a parameter this much in an uninformed direction is not pinned
+# below this BIC weight the chosen model shares the evidence: said so (as the trace fit's
+# comparable_warning: the others hold more than 5%)
+COMPARABLE = 0.95
 
 
 def fit_levels(
@@ -46,12 +51,17 @@ def fit_levels(
         table: a :class:`LevelsTable`, or the folder (or ``dataset.json``) of a
             dataset of kind ``levels`` (``idtool import-levels``).
         law: registered friction law (default Dahl, as :func:`idtool.fit`'s).
-        coupling: registered coupling law (default the power limit).
-        direction: of the vibration (default along the sliding).
+        coupling: registered coupling law (default the power limit), or ``"auto"``:
+            every coupling law a table can take, ranked by BIC
+            (:mod:`idtool._levels._choice`).
+        direction: of the vibration (default along the sliding), or ``"auto"``: every
+            direction, ranked by BIC (with ``coupling="auto"``: every pair).
         seed: of the multi-start.
 
     Returns:
-        The :class:`LevelsFit`.
+        The :class:`LevelsFit`; after a model choice the best model's, with every
+        model's BIC and weight (its ``ranking``) and the others whose weight reaches
+        0.001 kept for its predictions (its ``alternates``).
 
     Raises:
         IdtoolError: an invalid dataset (located problems) or an unknown name.
@@ -60,6 +70,46 @@ def fit_levels(
         table = load_levels(table)
     start = time.perf_counter()
     coupling = DEFAULT_COUPLING if coupling == "by-design" else coupling
+    pairs = options(coupling, direction)
+    if len(pairs) == 1:
+        return _fit_one(table, law, *pairs[0], seed, start)
+    fits = [_fit_one(table, law, c, d, seed, start) for c, d in pairs]
+    compared = [name for name, given in (("coupling", coupling), ("direction", direction))
+                if given == AUTO]  # fmt: skip
+    ranking = rank(
+        [
+            (label(f.model.coupling, f.model.direction, compared),
+             f"{f.model.law}/{f.model.coupling}/{f.model.direction}", *_criteria(f))
+            for f in fits
+        ]
+    )  # fmt: skip
+    by_key = {f"{f.model.law}/{f.model.coupling}/{f.model.direction}": f for f in fits}
+    best = by_key[ranking[0].key]
+    alternates = tuple(by_key[w.key] for w in kept(ranking)[1:])
+    warnings = best.warnings
+    if ranking[0].bic_weight < COMPARABLE:
+        shown = [w for w in ranking[1:] if w.bic_weight >= 0.01]
+        others = ", ".join(f"{w.name} {w.bic_weight:.2f}" for w in shown)
+        warnings = (
+            *warnings,
+            f"the {' and '.join(compared)} options fit comparably (BIC weights: "
+            f"{ranking[0].name} {ranking[0].bic_weight:.2f}, {others}): the estimates are "
+            f"{ranking[0].name}'s, the bands average the models by weight",
+        )
+    return dataclasses.replace(
+        best, ranking=tuple(ranking), alternates=alternates, warnings=warnings,
+        seconds=time.perf_counter() - start,
+    )  # fmt: skip
+
+
+def _criteria(fit: LevelsFit) -> tuple[float, float]:
+    """BIC and AIC of ``fit`` (:func:`idtool._levels._choice.table_bic`)."""
+    o = fit.optimum
+    return table_bic(o.loglik, len(fit.model.params) + sum(o.active), o.y.size)
+
+
+def _fit_one(table, law, coupling, direction, seed, start) -> LevelsFit:
+    """One model's fit (:func:`fit_levels`' stages)."""
     model = levels_model(table, law, coupling, direction)
     opt = estimate(model, seed=seed)
     estimates, sides, ends = {}, {}, {}

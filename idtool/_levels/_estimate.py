@@ -288,7 +288,11 @@ def profile_sides(model: LevelsModel, opt: Optimum, j: int) -> tuple[Side, Side,
     """Parameter ``j``'s interval sides (module docstring), internal scale, and theta
     refitted at each end (2, k) (at the range's edge for an open side): what
     predictions read where the table does not pin the parameter."""
-    z = float(opt.theta[j])
+    # an estimate the optimiser ran beyond the range's edge (a direction the table
+    # leaves flat: Kt of a soft transverse contact reached z = -3.6e4) is at its bound;
+    # walked from there, six bisections of [-3.6e4, 7] stopped at z = -271 (Kt's lower
+    # bound) and stated Kt < 1e4 N/m against a truth of 2e6 inside the flat region
+    z = float(np.clip(opt.theta[j], -Z_AT_BOUND, Z_AT_BOUND))
     var = float(opt.cov_theta[j, j])
     uninformed = opt.null.shape[1] > 0 and np.max(np.abs(opt.null[j])) > 0.1
     se = math.sqrt(var) if var > 0 and not uninformed else math.inf

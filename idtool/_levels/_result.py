@@ -14,7 +14,9 @@ import numpy as np
 from idtool._atomic import atomic_file, atomic_output_dir, write_text_atomic
 from idtool._errors import IdtoolError
 from idtool._fit._result import Estimate
+from idtool._fit._run import ChoiceWeight
 from idtool._lawfit._profile import Side
+from idtool._levels._choice import pool
 from idtool._levels._estimate import SD_NAMES, Optimum
 from idtool._levels._model import LevelsModel
 from idtool._levels._sample import LevelsPosterior, sample_table
@@ -102,6 +104,10 @@ class LevelsFit:
         seed: of the multi-start.
         posterior: the posterior once sampled (:meth:`sample`) or read back with the
             fit (:func:`idtool.load_levels_fit`); its draws then give the predictions.
+        ranking: after a model choice (``coupling="auto"``, ``direction="auto"``) every
+            model's BIC and weight, this one first (empty otherwise).
+        alternates: the other models of BIC weight >= 0.001, in the ranking's order:
+            the predictions average them with this one by weight.
     """
 
     model: LevelsModel
@@ -114,6 +120,10 @@ class LevelsFit:
     seconds: float
     seed: int = 0
     posterior: LevelsPosterior | None = dataclasses.field(default=None, compare=False)
+    # coupling="auto" / direction="auto": every model's BIC and weight, this one first,
+    # and the others kept for the predictions (BIC weight >= MIN_LAW_WEIGHT), in order
+    ranking: tuple[ChoiceWeight, ...] = ()
+    alternates: tuple[LevelsFit, ...] = dataclasses.field(default=(), compare=False)
 
     @property
     def table(self):
@@ -141,7 +151,37 @@ class LevelsFit:
         measurement's adds the scatter sd; both reach FR at the interval ends of each
         parameter the table does not bound on both sides (the others refitted there).
         A point is not pinned (NaN bands) where FR moves by more than 1% per unit of
-        the internal scale along a direction the table does not inform."""
+        the internal scale along a direction the table does not inform. After a model
+        choice (``coupling="auto"``, ``direction="auto"``) the models kept are averaged
+        by their BIC weights (:func:`idtool._levels._choice.pool`)."""
+        own = self._predict_own(
+            load_n, speed_m_s, amplitude_m=amplitude_m,
+            amplitude_fraction=amplitude_fraction, frequency_hz=frequency_hz,
+        )  # fmt: skip
+        if not self.alternates:
+            return own
+        # the alternates are the ranking's next entries (best first, those kept)
+        parts = [own] + [
+            a._predict_own(
+                load_n, speed_m_s, amplitude_m=amplitude_m,
+                amplitude_fraction=amplitude_fraction, frequency_hz=frequency_hz,
+            )
+            for a in self.alternates
+        ]  # fmt: skip
+        weights = [w.bic_weight for w in self.ranking[: len(parts)]]
+        fr, mean_band, next_band = pool(
+            weights, [p.fr for p in parts], [p.mean_band for p in parts],
+            [p.next_band for p in parts],
+        )  # fmt: skip
+        pinned = np.all([p.pinned for p in parts], axis=0)
+        return dataclasses.replace(
+            own, fr=fr, mean_band=mean_band, next_band=next_band, pinned=pinned
+        )
+
+    def _predict_own(
+        self, load_n, speed_m_s, *, amplitude_m=None, amplitude_fraction=None, frequency_hz=None
+    ) -> LevelsPrediction:
+        """:meth:`predict` of this model alone."""
         t = self.table
         if (amplitude_m is None) == (amplitude_fraction is None):
             raise ValueError("give amplitude_m or amplitude_fraction")
@@ -308,6 +348,19 @@ class LevelsFit:
         lines += [
             f"model     law {m.law}, coupling {m.coupling}, direction {m.direction}; "
             f"amplitude fraction = amplitude / {t.reference_amplitude_m * 1e6:g} um",
+        ]
+        if self.ranking:
+            lines += [
+                "",
+                "[[Models compared]] BIC, its excess over the best, weight exp(-delta/2) "
+                "(the predictions average those above 0.001)",
+            ]
+            for w in self.ranking:
+                lines.append(
+                    f"  {w.name:24s} BIC {w.bic:10.2f}  delta {w.bic - self.ranking[0].bic:8.2f}"
+                    f"  weight {w.bic_weight:.3f}"
+                )
+        lines += [
             "",
             "[[Estimates]] (95% intervals: Wald, checked against the profile likelihood)",
         ]
@@ -383,6 +436,10 @@ class LevelsFit:
             "seconds": self.seconds,
             "seed": self.seed,
             "command": command,
+            # coupling="auto" / direction="auto": every model's criteria, best first, and
+            # the models kept for the predictions (each a document of this form)
+            "models_compared": [w.to_dict("model") for w in self.ranking],
+            "alternates": [a.to_json(command) for a in self.alternates],
             # what idtool.load_levels_fit rebuilds the fit from (internal scale)
             "state": {
                 "sides": {
@@ -456,8 +513,12 @@ class LevelsFit:
         axes[0][0].set_ylabel("friction ratio ON / OFF [-]")
         axes[0][0].set_ylim(0.0, 1.1)
         bands = "posterior 95% bands" if self.posterior is not None else "95% bands"
+        if self.alternates:
+            bands += f", averaged over {1 + len(self.alternates)} models by BIC weight"
         fig.suptitle(
-            f"{t.name}: model ({self.model.law}, {self.model.coupling}), {bands}", fontsize=10
+            f"{t.name}: model ({self.model.law}, {self.model.coupling}, "
+            f"{self.model.direction}), {bands}",
+            fontsize=10,
         )
         fig.text(
             0.01, 0.01, "dark band: FR at a new condition; light: next measurement", fontsize=7

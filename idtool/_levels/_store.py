@@ -4,6 +4,7 @@ that read a fit folder ask first."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -12,6 +13,7 @@ import numpy as np
 
 from idtool._data._levels import load_levels
 from idtool._errors import IdtoolError
+from idtool._fit._run import ChoiceWeight
 from idtool._lawfit._profile import Side
 from idtool._lawfit._result import estimate_from_sides
 from idtool._levels._api import fit_levels
@@ -83,6 +85,9 @@ def load_levels_fit(folder: str | Path) -> LevelsFit:
             )  # fmt: skip
         else:
             fit = _rebuild(doc, table)
+            ranking = tuple(_choice(w) for w in doc.get("models_compared", ()))
+            alternates = tuple(_rebuild(a, table) for a in doc.get("alternates", ()))
+            fit = dataclasses.replace(fit, ranking=ranking, alternates=alternates)
     except (KeyError, TypeError, ValueError, IndexError) as err:
         raise IdtoolError(f"{path}: unreadable fit ({err!r}); run 'idtool fit' again") from None
     if (folder / POSTERIOR_NC).is_file():
@@ -95,6 +100,13 @@ def load_levels_fit(folder: str | Path) -> LevelsFit:
         )  # fmt: skip
         object.__setattr__(fit, "posterior", post)
     return fit
+
+
+def _choice(entry: dict) -> ChoiceWeight:
+    return ChoiceWeight(
+        str(entry["model"]), str(entry["key"]), float(entry["bic"]), float(entry["aic"]),
+        float(entry["bic_weight"]), float(entry["aic_weight"]),
+    )  # fmt: skip
 
 
 def _rebuild(doc: dict, table) -> LevelsFit:
