@@ -10,7 +10,7 @@ import json
 
 import numpy as np
 import pytest
-from test_levels_table import TRUTH, simulate_table
+from test_levels_table import TRUTH, dong_dapino, simulate_table
 
 import idtool
 from idtool._cli._main import main
@@ -121,3 +121,28 @@ def test_the_command_line_takes_direction_auto_on_a_table(transverse, tmp_path, 
     assert "[[Models compared]]" in out
     doc = json.loads((tmp_path / "fit" / "fit.json").read_text())
     assert doc["model"]["direction"] == "transverse" and len(doc["models_compared"]) == 3
+
+
+def test_the_report_shows_the_models_compared(transverse, tmp_path):
+    _, folder, _ = transverse
+    import shutil
+
+    copy = shutil.copytree(folder, tmp_path / "fit")
+    page = idtool.write_report(copy).read_text()
+    section = page.split("Models compared")[1].split("</table>")[0]
+    for name in idtool.DIRECTIONS:
+        assert name in section
+    assert "estimates and bands" in section and "best of 3 by BIC" in page
+
+
+def test_a_saturated_table_says_what_its_ranking_means(tmp_path):
+    """The published two-row summary: along the sliding cannot meet its 87 mm/s row
+    (FR reaches 1 first) and ranks last; the best model meets both rows with no
+    residual degrees of freedom, and the fit says its weight rewards that exact fit."""
+    idtool.import_levels(
+        dong_dapino(tmp_path), tmp_path / "ds", material="steel", friction="coefficient"
+    )
+    fit = idtool.fit_levels(tmp_path / "ds", direction="auto")
+    assert fit.ranking[-1].name == "along"
+    assert not fit.optimum.restricted
+    assert any("leaves no residual degrees of freedom" in w for w in fit.warnings)

@@ -96,6 +96,17 @@ def fit_levels(
             f"{ranking[0].name} {ranking[0].bic_weight:.2f}, {others}): the estimates are "
             f"{ranking[0].name}'s, the bands average the models by weight",
         )
+    if not best.optimum.restricted:
+        # saturated: the sds by ML run to their floor where a model meets every row,
+        # and -2 log L falls by ~14 per row with it: the weights reward the exact fit
+        warnings = (
+            *warnings,
+            f"the best model ({ranking[0].name}) leaves no residual degrees of freedom "
+            "(its sds by ML, at or near their floor): its BIC weight says the others "
+            "cannot meet the table, not that it predicts better, and its bands are "
+            f"biased narrow; add conditions or repeats before choosing a {compared[0]} "
+            "from this table",
+        )
     return dataclasses.replace(
         best, ranking=tuple(ranking), alternates=alternates, warnings=warnings,
         seconds=time.perf_counter() - start,

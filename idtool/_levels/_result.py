@@ -514,11 +514,10 @@ class LevelsFit:
         axes[0][0].set_ylim(0.0, 1.1)
         bands = "posterior 95% bands" if self.posterior is not None else "95% bands"
         if self.alternates:
-            bands += f", averaged over {1 + len(self.alternates)} models by BIC weight"
+            bands += f"\naveraged over {1 + len(self.alternates)} models by BIC weight"
         fig.suptitle(
-            f"{t.name}: model ({self.model.law}, {self.model.coupling}, "
-            f"{self.model.direction}), {bands}",
-            fontsize=10,
+            f"{t.name}: {self.model.law}, {self.model.coupling}, {self.model.direction}; {bands}",
+            fontsize=9,
         )
         fig.text(
             0.01, 0.01, "dark band: FR at a new condition; light: next measurement", fontsize=7

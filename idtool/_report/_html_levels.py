@@ -117,6 +117,24 @@ def _data(fit: LevelsFit) -> str:
     return table(head, rows)
 
 
+def _models(fit: LevelsFit) -> str:
+    """The model choice's ranking (``fit_levels(..., direction="auto")`` or
+    ``coupling="auto"``): BIC, its excess over the best, weight, kept or not."""
+    best = fit.ranking[0].bic
+    kept = 1 + len(fit.alternates)
+    rows = [
+        [w.name, f"{w.bic:.2f}", f"{w.bic - best:.2f}", f"{w.bic_weight:.3f}",
+         "estimates and bands" if i == 0 else ("bands" if i < kept else "-")]
+        for i, w in enumerate(fit.ranking)
+    ]  # fmt: skip
+    return (
+        "<p>Every model fitted, ranked by BIC; weights exp(-delta/2) (their posterior "
+        "probabilities under equal prior odds). The estimates are the best model's; the "
+        "bands average the models used for them by weight.</p>"
+        + table(["model", "BIC", "delta", "weight", "used for"], rows)
+    )
+
+
 def _convergence(fit: LevelsFit) -> str:
     post = fit.posterior
     if post is None:
@@ -158,6 +176,8 @@ def write_levels_report(fit_folder: str | Path) -> Path:
             )
         else:
             sec["Answer"] += '<p class="note">The table has one speed: no curve against speed.</p>'
+    if fit.ranking:
+        sec["Models compared"] = _models(fit)
     sec["What to measure next"] = f"<p>{html.escape(NO_PLAN)}</p>"
     sec["Estimates"] = _estimates(fit)
     sec["Data"] = _data(fit)
@@ -199,7 +219,15 @@ def write_levels_report(fit_folder: str | Path) -> Path:
             ["material", t.material],
             ["dataset", f"{t.name}: friction table, {t.n_rows} rows; sha256 {t.sha256}"],
             ["source", t.source or "-"],
-            ["model", f"{m.law} friction, {m.coupling} coupling, vibration {m.direction}"],
+            [
+                "model",
+                f"{m.law} friction, {m.coupling} coupling, vibration {m.direction}"
+                + (
+                    f" (best of {len(fit.ranking)} by BIC; bands over {1 + len(fit.alternates)})"
+                    if fit.ranking
+                    else ""
+                ),
+            ],
             ["posterior", posterior],
             ["report", f"{rid}, {now_utc()}, idtool {__version__}"],
         ],
