@@ -145,6 +145,7 @@ _LAZY = {
     "LevelsPosterior": "idtool._levels._sample",
     "load_levels_fit": "idtool._levels._store",
     "TableComparison": "idtool._levels._compare",
+    "LevelsPlan": "idtool._levels._plan",
 }
 
 # The one list of public names: __all__ is read from it, and the TYPE_CHECKING block
@@ -229,6 +230,9 @@ if TYPE_CHECKING:
     )
     from idtool._levels._compare import (
         TableComparison as TableComparison,
+    )
+    from idtool._levels._plan import (
+        LevelsPlan as LevelsPlan,
     )
     from idtool._levels._result import (
         LevelsFit as LevelsFit,

@@ -75,7 +75,7 @@ def test_report_has_its_sections_and_figures(dd_fit, capsys):
     page = (dd_fit / "report.html").read_text()
     for text in (
         "Answer", "Friction ratio against sliding speed", "What to measure next",
-        "does not plan the next rows of a friction table", "Estimates", "posterior median",
+        "every physical parameter within a 5% relative sd", "Estimates", "posterior median",
         "Data", "Convergence", "Provenance", "Sign-off", "IDT-",
         "cannot pin a 2-parameter coupling law", "data:image/png;base64",
     ):  # fmt: skip
@@ -84,15 +84,17 @@ def test_report_has_its_sections_and_figures(dd_fit, capsys):
     assert (dd_fit / "report.md").is_file()
 
 
-def test_plan_says_a_table_fit_is_not_supported_and_compare_reads_it(dd_fit, tmp_path):
+def test_plan_refuses_the_laws_goal_on_a_table_and_compare_reads_it(dd_fit, tmp_path):
+    # idtool plan on tables: tests/test_levels_plan.py; the laws goal is the traces'
     run = subprocess.run(
-        [sys.executable, "-m", "idtool._cli._main", "plan", str(dd_fit), "--out",
-         str(tmp_path / "p")],
+        [sys.executable, "-m", "idtool._cli._main", "plan", str(dd_fit), "--goal", "laws",
+         "--out", str(tmp_path / "p")],
         capture_output=True, text=True,
     )  # fmt: skip
     assert run.returncode == EXIT_BAD_INPUT, run.stderr
     assert "Traceback" not in run.stderr
-    assert "idtool plan works on fits of bench traces only" in run.stderr
+    assert "--goal laws plans pulls of bench traces" in run.stderr
+    assert not (tmp_path / "p").exists()
     with pytest.raises(idtool.IdtoolError, match="friction table"):
         idtool.load_fit(dd_fit)
     # compare reads table fits (tests/test_levels_compare.py): the two-row summary

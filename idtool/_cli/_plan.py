@@ -107,10 +107,10 @@ def add_goal_arguments(p: argparse.ArgumentParser, default: str) -> None:
 def _run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from idtool._levels._store import is_levels_fit, not_for_tables
+    from idtool._levels._store import is_levels_fit
 
-    if is_levels_fit(args.fit):  # first: no option of the planner applies to a table
-        raise not_for_tables(args.fit, "idtool plan")
+    if is_levels_fit(args.fit):
+        return _run_levels(args)
     # the options are checked before the fit is read
     loads = _range("--loads", args.loads)
     amps = _range("--amplitudes", args.amplitudes, 1.0)
@@ -152,6 +152,71 @@ def _run(args: argparse.Namespace) -> int:
     print(
         f"wrote {args.out}/plan.csv (idtool import --conditions reads it), plan.txt, "
         "plan.json, plan.png"
+    )
+    return 0
+
+
+def _run_levels(args: argparse.Namespace) -> int:
+    """``idtool plan`` on a friction table's fit: the next rows
+    (:meth:`idtool.LevelsFit.plan`); the targets ``--at LOAD,AMPLITUDE`` (amplitude as a
+    fraction of the table's reference amplitude) at each of ``--speeds`` (default the
+    table's speeds)."""
+    import json
+
+    from idtool._levels._store import load_levels_fit
+
+    if args.goal == "laws":
+        raise IdtoolError(
+            f"{args.fit} is the fit of a friction table: --goal laws plans pulls of bench "
+            "traces; on a table use --goal band or parameters (and compare the coupling "
+            "laws with idtool fit --coupling auto)"
+        )
+    for flag, given in (("--next-pull", args.next_pull), ("--on-time", args.on_time)):
+        if given:
+            raise IdtoolError(f"{flag} applies to bench traces, not to a friction table")
+    loads = _range("--loads", args.loads)
+    amps = _range("--amplitudes", args.amplitudes)
+    goal = goal_options(args)
+    grid = max(_grid(args.grid))
+    refuse_existing(args.out, args.force)
+    fit = load_levels_fit(args.fit)
+    t = fit.table
+    ref = t.reference_amplitude_m
+    speeds = sorted(set(args.speeds)) if args.speeds else sorted(set(t.sliding_speed_m_s))
+    at = [(n, a * ref, v) for n, a in goal.at for v in speeds] or None
+    plan = fit.plan(
+        goal.goal,
+        goal.n_pulls,
+        at=at,
+        half_width=goal.half_width,
+        rel=goal.rel,
+        loads_n=loads,
+        amplitudes_m=None if amps is None else (amps[0] * ref, amps[1] * ref),
+        speeds_m_s=(min(speeds), max(speeds)) if args.speeds else None,
+        grid=grid,
+    )
+    text = plan.report()
+    doc = {
+        "kind": "levels",
+        "goal": plan.goal,
+        "unit": plan.unit,
+        "target": plan.target,
+        "values": list(plan.values),
+        "uniform": list(plan.uniform),
+        "rows_to_target": plan.rows_to_target,
+        "at": [list(x) for x in plan.at],
+        "rows": [vars(r) for r in plan.rows],
+        "notes": list(plan.notes),
+        "fit": str(args.fit),
+    }
+    with atomic_output_dir(args.out, force=args.force) as tmp:
+        (tmp / "plan.csv").write_text(plan.to_csv(t.friction))
+        (tmp / "plan.txt").write_text(text + "\n")
+        (tmp / "plan.json").write_text(json.dumps(doc, indent=1) + "\n")
+    print(text)
+    print(
+        f"wrote {args.out}/plan.csv (fill in OFF and ON; idtool import-levels reads it), "
+        "plan.txt, plan.json"
     )
     return 0
 

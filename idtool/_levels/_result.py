@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -17,8 +18,9 @@ from idtool._fit._result import Estimate
 from idtool._fit._run import ChoiceWeight
 from idtool._lawfit._profile import Side
 from idtool._levels._choice import pool
-from idtool._levels._estimate import SD_NAMES, Optimum
+from idtool._levels._estimate import SD_FLOOR, SD_NAMES, Optimum, _cov, _data
 from idtool._levels._model import LevelsModel
+from idtool._levels._plan import LevelsPlan, plan_rows
 from idtool._levels._sample import LevelsPosterior, sample_table
 from idtool._posterior._record import PosteriorRecord
 from idtool._posterior._runner import MAX_MINUTES, MAX_STEPS
@@ -248,6 +250,47 @@ class LevelsFit:
 
         fr = np.median(fr_d, axis=0).reshape(n.shape)
         return LevelsPrediction(n, a, v, f, fr, band(mean), band(nxt), np.ones(n.shape, bool))
+
+    # --------------------------------------------------------------------- plan
+    def plan(
+        self,
+        goal: str = "band",
+        n_rows: int = 6,
+        *,
+        at: Sequence[tuple[float, float, float]] | None = None,
+        half_width: float = 0.01,
+        rel: float = 0.05,
+        loads_n: tuple[float, float] | None = None,
+        amplitudes_m: tuple[float, float] | None = None,
+        speeds_m_s: tuple[float, float] | None = None,
+        grid: int = 5,
+    ) -> LevelsPlan:
+        """The next ``n_rows`` measurements of the table for a goal
+        (:mod:`idtool._levels._plan`): ``band`` (the largest FR band half-width [FR]
+        over the conditions ``at``, each (load [N], amplitude [m], speed [m/s]), down to
+        ``half_width``) or ``parameters`` (every physical parameter to relative sd
+        ``rel``); candidates on a geometric grid of ``grid`` loads x amplitudes x
+        speeds within the ranges given (default the table's). From the linearised
+        model at the fit's estimate (the best model's after a model choice)."""
+        _, meas, kmat = _data(self.model)
+        sds = self.optimum.sds
+        floor = [max(sds["scatter_mu"], SD_FLOOR), max(sds["scatter_fr"], SD_FLOOR), 0.0]
+        plan = plan_rows(
+            self.model, np.asarray(self.optimum.theta, float), _cov(meas, kmat, np.array(floor)),
+            sds, goal, n_rows, at=at, half_width=half_width, rel=rel, loads_n=loads_n,
+            amplitudes_m=amplitudes_m, speeds_m_s=speeds_m_s, grid=grid,
+        )  # fmt: skip
+        loose = [n for n, e in self.estimates.items() if e.one_sided or e.weakly_identified]
+        if loose:
+            # predict widens its bands to these parameters' interval ends; the linear
+            # model cannot (a seed of tests/test_levels_plan.py's table: 0.056 for 0.076)
+            note = (
+                f"{', '.join(loose)} not bounded on both sides: predictions widen their "
+                "bands to the interval ends, the linearised values here do not (they "
+                "can understate the band)"
+            )
+            plan = dataclasses.replace(plan, notes=(*plan.notes, note))
+        return plan
 
     # ---------------------------------------------------------------- posterior
     def sample(

@@ -22,10 +22,11 @@ from idtool._version import __version__
 __all__ = ["write_levels_report"]
 
 REPORT_HTML, REPORT_MD = "report.html", "report.md"
-NO_PLAN = (
-    "The planner (idtool plan) works on fits of bench traces; it does not plan the next "
-    "rows of a friction table."
-)
+PLAN_ROWS = 6  # rows the report's section proposes (idtool plan for more, or a band goal)
+HEAD = [
+    "rank", "load [N]", "amplitude [um]", "speed [mm/s]", "largest rel. sd after",
+    "uniform choice",
+]  # fmt: skip
 
 
 def _bands(fit: LevelsFit) -> tuple[str, list[str]]:
@@ -117,6 +118,38 @@ def _data(fit: LevelsFit) -> str:
     return table(head, rows)
 
 
+def _next_rows(fit: LevelsFit) -> str:
+    """The parameters goal's plan (every physical parameter to a 5% relative sd):
+    met, or the next rows with the goal's value after each beside a uniform choice."""
+    plan = fit.plan("parameters", PLAN_ROWS)
+    if plan.met:
+        return (
+            f"<p>Every physical parameter is within a {100 * plan.target:g}% relative sd "
+            f"({100 * plan.values[0]:.2g}% at most): no row is needed for that goal. For a "
+            "narrower band at stated conditions: idtool plan FITDIR --goal band --at "
+            "LOAD,AMPLITUDE.</p>"
+        )
+    rows = [
+        [str(r.rank), g(r.normal_load_n), g(r.amplitude_m * 1e6), g(r.sliding_speed_m_s * 1e3),
+         f"{100 * r.value_after:.3g}%", f"{100 * u:.3g}%"]
+        for r, u in zip(plan.rows, plan.uniform[1:], strict=True)
+    ]  # fmt: skip
+    reach = (
+        f"{plan.rows_to_target} of them reach it"
+        if plan.rows_to_target is not None
+        else f"{PLAN_ROWS} do not reach it"
+    )
+    return (
+        f"<p>Goal: every physical parameter within a {100 * plan.target:g}% relative sd; "
+        f"now {100 * plan.values[0]:.3g}% at most. The next {PLAN_ROWS} rows (the "
+        f"linearised model, idtool plan FITDIR --goal parameters); {reach}.</p>"
+        + table(HEAD, rows)
+        + '<p class="note">'
+        + html.escape("; ".join(plan.notes))
+        + "</p>"
+    )
+
+
 def _models(fit: LevelsFit) -> str:
     """The model choice's ranking (``fit_levels(..., direction="auto")`` or
     ``coupling="auto"``): BIC, its excess over the best, weight, kept or not."""
@@ -178,7 +211,7 @@ def write_levels_report(fit_folder: str | Path) -> Path:
             sec["Answer"] += '<p class="note">The table has one speed: no curve against speed.</p>'
     if fit.ranking:
         sec["Models compared"] = _models(fit)
-    sec["What to measure next"] = f"<p>{html.escape(NO_PLAN)}</p>"
+    sec["What to measure next"] = _next_rows(fit)
     sec["Estimates"] = _estimates(fit)
     sec["Data"] = _data(fit)
     if fit.notes:
