@@ -10,25 +10,13 @@ import json
 
 import numpy as np
 import pytest
-from test_levels_table import TRUTH, dong_dapino, simulate_table
+from test_levels_table import TRUTH, dong_dapino, simulate_table, table_csv
 
 import idtool
 from idtool._cli._main import main
 from idtool._levels._choice import POOL_DRAWS, pool
 
 pytestmark = pytest.mark.slow
-
-
-def _csv(table: idtool.LevelsTable, path):
-    lines = ["load (N),amplitude (um),frequency (kHz),speed (mm/s),off (N),on (N),repeat"] + [
-        f"{n},{a * 1e6},22,{v * 1e3},{float(off)!r},{float(on)!r},{r}"
-        for n, a, v, off, on, r in zip(
-            table.normal_load_n, table.amplitude_m, table.sliding_speed_m_s, table.off,
-            table.on, table.repeat, strict=True,
-        )
-    ]  # fmt: skip
-    path.write_text("\n".join(lines) + "\n")
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -38,7 +26,7 @@ def transverse(tmp_path_factory):
     root = tmp_path_factory.mktemp("levels_choice")
     table = simulate_table(3, direction="transverse", name="across")
     idtool.import_levels(
-        _csv(table, root / "t.csv"), root / "ds", material="across", friction="force"
+        table_csv(table, root / "t.csv"), root / "ds", material="across", friction="force"
     )
     fit = idtool.fit_levels(root / "ds", direction="auto")
     return fit, fit.save(root / "fit"), root / "ds"

@@ -12,7 +12,7 @@ import json
 
 import numpy as np
 import pytest
-from test_levels_table import TRUTH, simulate_table
+from test_levels_table import TRUTH, simulate_table, table_csv
 
 import idtool
 from idtool._cli._main import main
@@ -35,15 +35,7 @@ def folders(tmp_path_factory):
     out = {}
     for label, seed, truth in (("A", 0, TRUTH), ("B", 1, WEAKER), ("A2", 2, TRUTH)):
         t = simulate_table(seed, truth=truth)
-        lines = ["load (N),amplitude (um),frequency (kHz),speed (mm/s),off (N),on (N),repeat"] + [
-            f"{n},{a * 1e6},22,{v * 1e3},{float(off)!r},{float(on)!r},{r}"
-            for n, a, v, off, on, r in zip(
-                t.normal_load_n, t.amplitude_m, t.sliding_speed_m_s, t.off, t.on, t.repeat,
-                strict=True,
-            )
-        ]  # fmt: skip
-        csv = root / f"{label}.csv"
-        csv.write_text("\n".join(lines) + "\n")
+        csv = table_csv(t, root / f"{label}.csv")
         ds = idtool.import_levels(csv, root / f"ds-{label}", material=label, friction="force")
         out[label] = idtool.fit_levels(ds).save(root / label)
     return out

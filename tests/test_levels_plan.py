@@ -11,7 +11,7 @@ import json
 
 import numpy as np
 import pytest
-from test_levels_table import TRUTH, simulate_table
+from test_levels_table import TRUTH, simulate_table, table_csv
 
 import idtool
 from idtool._cli._main import EXIT_BAD_INPUT, main
@@ -104,14 +104,7 @@ def test_the_parameters_goal_beats_a_uniform_choice_and_cannot_go_below_nothing(
 
 def test_the_command_line_writes_a_sheet_that_imports(tmp_path, capsys):
     table = simulate_table(0)
-    lines = ["load (N),amplitude (um),frequency (kHz),speed (mm/s),off (N),on (N),repeat"] + [
-        f"{n},{a * 1e6},22,{v * 1e3},{float(off)!r},{float(on)!r},{r}"
-        for n, a, v, off, on, r in zip(
-            table.normal_load_n, table.amplitude_m, table.sliding_speed_m_s, table.off,
-            table.on, table.repeat, strict=True,
-        )
-    ]  # fmt: skip
-    (tmp_path / "t.csv").write_text("\n".join(lines) + "\n")
+    table_csv(table, tmp_path / "t.csv")
     idtool.import_levels(tmp_path / "t.csv", tmp_path / "ds", material="m", friction="force")
     assert main(["fit", str(tmp_path / "ds"), "--out", str(tmp_path / "fit")]) == 0
     out = tmp_path / "plan"
