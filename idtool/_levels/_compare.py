@@ -64,8 +64,33 @@ def _conditions(fits: Sequence[LevelsFit]) -> tuple[np.ndarray, str | None]:
 
 
 def _draws(fit: LevelsFit, cond: np.ndarray, n_draws: int, seed: int) -> tuple[np.ndarray, str]:
-    """FR draws (d, n) at the conditions, each with its draw of the discrepancy, and
-    where they came from (``posterior`` or ``covariance``)."""
+    """FR draws (n_draws, n) at the conditions, each with its draw of the discrepancy,
+    and where this fit's came from (``posterior`` or ``covariance``). After a model
+    choice the models kept share the draws by their BIC weights (the alternates'
+    Gaussian on their covariances), shuffled: as the fit's predictions average them."""
+    if not fit.alternates:
+        return _model_draws(fit, cond, n_draws, seed)
+    models = (fit, *fit.alternates)
+    w = np.array([r.bic_weight for r in fit.ranking[: len(models)]])
+    # exactly n_draws (they are paired with the other fits'): largest remainders
+    share = n_draws * w / w.sum()
+    counts = np.floor(share).astype(int)
+    counts[np.argsort(counts - share)[: n_draws - counts.sum()]] += 1
+    seeds = np.random.SeedSequence(seed).spawn(len(models) + 1)
+    parts = [
+        _model_draws(m, cond, int(c), int(s.generate_state(1)[0]))
+        for m, c, s in zip(models, counts, seeds, strict=False)
+        if c > 0
+    ]
+    pooled = np.concatenate([d for d, _ in parts])
+    order = np.random.default_rng(seeds[-1]).permutation(pooled.shape[0])
+    return pooled[order], parts[0][1]
+
+
+def _model_draws(
+    fit: LevelsFit, cond: np.ndarray, n_draws: int, seed: int
+) -> tuple[np.ndarray, str]:
+    """:func:`_draws` of ``fit``'s own model."""
     import jax
 
     rng = np.random.default_rng(seed)
