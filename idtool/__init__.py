@@ -134,6 +134,7 @@ _LAZY = {
     "Series": "idtool._data._series",
     "read_series": "idtool._data._series",
     "simulate_series": "idtool._simulate._series",
+    "simulate_table": "idtool._simulate._table",
     "fit_law": "idtool._lawfit._api",
     "SeriesFit": "idtool._lawfit._result",
     "LevelsTable": "idtool._data._levels",
@@ -370,6 +371,9 @@ if TYPE_CHECKING:
     )
     from idtool._simulate._series import (
         simulate_series as simulate_series,
+    )
+    from idtool._simulate._table import (
+        simulate_table as simulate_table,
     )
     from idtool._simulate._simulate import (
         simulate_bench as simulate_bench,

@@ -221,7 +221,7 @@ FILE_SECONDS: dict[str, float] = {
     "tests/test_notebooks.py[01_seed_model]": 50,
     "tests/test_arrowhead.py": 38,
     "tests/test_parameter_settings.py": 36,
-    "tests/test_levels_table.py": 35,
+    "tests/test_levels_table.py": 110,
     "tests/test_ridge_jump.py": 35,
     "tests/test_predict.py": 34,
     "tests/test_cov_blocks.py": 31,

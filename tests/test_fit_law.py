@@ -196,3 +196,42 @@ def test_cli_writes_refuses_and_locates(tmp_path, capsys):
         and "'abc' is not a number" in err
     )
     assert not (tmp_path / "o2").exists() and not (tmp_path / "o3").exists()
+
+
+def test_the_simulated_departures_are_what_they_say():
+    """simulate_series' measuring-chain departures (benchmarks/study_benches.py), against
+    what each claims: the lagged force is a first-order sensor's steady response to a
+    sine (amplitude 1/sqrt(1 + (w tau)^2), phase -atan(w tau): closed form); the
+    coloured noise's lag-1 correlation 0.9; the hum a 60 Hz line of 2 noise sds; the
+    drift 5 noise sds at the end."""
+    from idtool._simulate._series import HUM_HZ, LAG_S
+
+    f_hz, a_m, viscous = 200.0, 1e-4, 20.0
+    w = 2 * np.pi * f_hz
+    kw = dict(amplitude_m=a_m, frequency_hz=f_hz, duration_s=0.05, rate_hz=1e4, noise_n=0.0)
+    # a viscous force, 20 V (Fc negligible): a pure sine
+    s = idtool.simulate_series("coulomb-viscous", {"Fc": 1e-9, "sigma2": viscous},
+                               departure="lag", **kw)  # fmt: skip
+    wt = w * LAG_S
+    steady = viscous * a_m * w / np.sqrt(1 + wt**2) * np.sin(w * s.time_s - np.arctan(wt))
+    late = s.time_s > 20 * LAG_S  # the transient exp(-t / tau) gone
+    # 4.4e-5 N of 2.5 N measured: the force linear between the fine grid's samples
+    assert np.max(np.abs(s.force_n - steady)[late]) < 1e-4
+
+    clean = idtool.simulate_series("lugre", kind="sliding", noise_n=0.0, seed=5)
+    noise = {}
+    for dep in ("coloured", "hum", "drift"):
+        noise[dep] = idtool.simulate_series("lugre", kind="sliding", departure=dep,
+                                            seed=5).force_n - clean.force_n  # fmt: skip
+    c = noise["coloured"]
+    assert np.corrcoef(c[1:], c[:-1])[0, 1] == pytest.approx(0.9, abs=0.03)
+    t = clean.time_s
+    hum = noise["hum"] - c
+    assert np.max(np.abs(hum)) == pytest.approx(0.02, rel=0.01)
+    assert abs(np.dot(hum, np.exp(2j * np.pi * HUM_HZ * t))) / t.size == pytest.approx(
+        0.01, rel=0.02
+    )
+    drift = noise["drift"] - c
+    assert drift[0] == pytest.approx(0.0, abs=1e-12) and drift[-1] == pytest.approx(0.05)
+    with pytest.raises(ValueError, match="departure"):
+        idtool.simulate_series("lugre", departure="wobble")

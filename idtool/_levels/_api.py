@@ -10,14 +10,15 @@ from pathlib import Path
 
 import numpy as np
 
+from idtool._data._design import speed_resolved_pairs
 from idtool._data._levels import LevelsTable, load_levels
 from idtool._fit._variability import MISFIT, MISSPECIFIED_SD
 from idtool._lawfit._result import estimate_from_sides
-from idtool._levels._choice import AUTO, kept, label, options, rank, table_bic
-from idtool._levels._estimate import estimate, profile_sides
+from idtool._levels._choice import kept, label, options, rank, table_bic
+from idtool._levels._estimate import SD_FLOOR, SD_NAMES, estimate, profile_sides
 from idtool._levels._model import DEFAULT_LAW, LevelsModel, levels_model
 from idtool._levels._result import LevelsFit
-from idtool._model._names import DEFAULT_COUPLING, DEFAULT_DIRECTION
+from idtool._model._names import BY_DESIGN, DEFAULT_DIRECTION
 
 __all__ = ["fit_levels"]
 
@@ -31,7 +32,7 @@ def fit_levels(
     table: LevelsTable | str | Path,
     *,
     law: str = DEFAULT_LAW,
-    coupling: str = DEFAULT_COUPLING,
+    coupling: str = BY_DESIGN,
     direction: str = DEFAULT_DIRECTION,
     seed: int = 0,
 ) -> LevelsFit:
@@ -51,9 +52,12 @@ def fit_levels(
         table: a :class:`LevelsTable`, or the folder (or ``dataset.json``) of a
             dataset of kind ``levels`` (``idtool import-levels``).
         law: registered friction law (default Dahl, as :func:`idtool.fit`'s).
-        coupling: registered coupling law (default the power limit), or ``"auto"``:
-            every coupling law a table can take, ranked by BIC
-            (:mod:`idtool._levels._choice`).
+        coupling: registered coupling law, ``"auto"`` (every coupling law a table can
+            take, ranked by BIC: :mod:`idtool._levels._choice`) or ``"by-design"``
+            (default, as :func:`idtool.fit`'s): the power limit, and on a table that
+            measured some load and amplitude at two or more speeds also the load-power
+            law, BIC choosing (two speeds at one slip amplitude pin it and Kt whatever
+            the law, so a law's wrong shape shows as misfit instead of moving Kt).
         direction: of the vibration (default along the sliding), or ``"auto"``: every
             direction, ranked by BIC (with ``coupling="auto"``: every pair).
         seed: of the multi-start.
@@ -69,13 +73,15 @@ def fit_levels(
     if not isinstance(table, LevelsTable):
         table = load_levels(table)
     start = time.perf_counter()
-    coupling = DEFAULT_COUPLING if coupling == "by-design" else coupling
-    pairs = options(coupling, direction)
+    resolved = bool(
+        speed_resolved_pairs(table.normal_load_n, table.amplitude_m, table.sliding_speed_m_s)
+    )
+    pairs = options(coupling, direction, speed_resolved=resolved)
     if len(pairs) == 1:
         return _fit_one(table, law, *pairs[0], seed, start)
     fits = [_fit_one(table, law, c, d, seed, start) for c, d in pairs]
-    compared = [name for name, given in (("coupling", coupling), ("direction", direction))
-                if given == AUTO]  # fmt: skip
+    varied = (("coupling", {c for c, _ in pairs}), ("direction", {d for _, d in pairs}))
+    compared = [name for name, values in varied if len(values) > 1]
     ranking = rank(
         [
             (label(f.model.coupling, f.model.direction, compared),
@@ -96,9 +102,14 @@ def fit_levels(
             f"{ranking[0].name} {ranking[0].bic_weight:.2f}, {others}): the estimates are "
             f"{ranking[0].name}'s, the bands average the models by weight",
         )
-    if not best.optimum.restricted:
+    o = best.optimum
+    fr_sds = [
+        o.sds[n] for n, on in zip(SD_NAMES, o.active, strict=True) if on and n != "scatter_mu"
+    ]
+    if not o.restricted and max(fr_sds, default=0.0) <= 2.0 * SD_FLOOR:
         # saturated: the sds by ML run to their floor where a model meets every row,
         # and -2 log L falls by ~14 per row with it: the weights reward the exact fit
+        # (not so where the best model still misses a row: its discrepancy is large)
         warnings = (
             *warnings,
             f"the best model ({ranking[0].name}) leaves no residual degrees of freedom "

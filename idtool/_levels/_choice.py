@@ -1,5 +1,6 @@
 """Model choice on a friction table: every coupling law and/or direction of vibration
-fitted (``fit_levels(..., coupling="auto", direction="auto")``), ranked by BIC, the
+fitted (``fit_levels(..., coupling="auto", direction="auto")``; by default the power
+limit and the load-power law where the table resolves speeds), ranked by BIC, the
 others kept by their BIC weights for the predictions, as the trace fit does
 (:func:`idtool._fit._run.choice_weights`).
 
@@ -25,6 +26,7 @@ import numpy as np
 from idtool._fit._run import MIN_LAW_WEIGHT, ChoiceWeight
 from idtool._model._coupling import COUPLINGS, reacts_on_vibration
 from idtool._model._directions import DIRECTIONS
+from idtool._model._names import BY_DESIGN, DEFAULT_COUPLING, SPEED_RESOLVED_COUPLINGS
 
 __all__ = ["AUTO", "POOL_DRAWS", "options", "pool", "rank", "table_bic"]
 
@@ -32,15 +34,19 @@ AUTO = "auto"
 POOL_DRAWS = 4000  # draws of the pooled band: its 2.5% point to ~0.5% of the band
 
 
-def options(coupling: str, direction: str) -> list[tuple[str, str]]:
+def options(coupling: str, direction: str, speed_resolved: bool = False) -> list[tuple[str, str]]:
     """The (coupling, direction) pairs to fit: every registered coupling law a table can
-    take (not one that models the horn's transducer) where ``coupling`` is ``auto``,
-    every direction where ``direction`` is."""
-    couplings = (
-        [c for c in COUPLINGS if not reacts_on_vibration(COUPLINGS.get(c))]
-        if coupling == AUTO
-        else [coupling]
-    )
+    take (not one that models the horn's transducer) where ``coupling`` is ``auto``;
+    where it is ``by-design``, the power limit, and the load-power law too on a table
+    that measured some load and amplitude at two or more speeds (``speed_resolved``:
+    the trace fit's rule, :data:`idtool._model._names.BY_DESIGN`); every direction where
+    ``direction`` is ``auto``."""
+    if coupling == AUTO:
+        couplings = [c for c in COUPLINGS if not reacts_on_vibration(COUPLINGS.get(c))]
+    elif coupling == BY_DESIGN:
+        couplings = list(SPEED_RESOLVED_COUPLINGS) if speed_resolved else [DEFAULT_COUPLING]
+    else:
+        couplings = [coupling]
     directions = list(DIRECTIONS) if direction == AUTO else [direction]
     return [(c, d) for d in directions for c in couplings]
 
@@ -87,7 +93,7 @@ def kept(ranking: Sequence[ChoiceWeight]) -> list[ChoiceWeight]:
 
 def _split_draws(fr, lo, hi, z):
     """Draws of a split log-normal with median ``fr`` and 95% points ``lo``, ``hi``
-    (points,), from standard normals ``z`` (draws, points)."""
+    (points,), from standard normals ``z`` (draws, points), or (draws, 1) shared."""
     up = np.log(hi / fr) / 1.96
     down = np.log(fr / lo) / 1.96
     return fr * np.exp(np.where(z > 0, z * up, z * down))
@@ -110,7 +116,10 @@ def pool(
     mean_draws, next_draws = [], []
     for i, c in enumerate(counts):
         f = np.ravel(fr[i])
-        z = rng.standard_normal((c, f.size))
+        # one normal per draw, shared by every point (common random numbers): each
+        # point's band is the same Monte Carlo estimate, and a curve of them is smooth
+        # instead of jagged by independent errors from point to point
+        z = rng.standard_normal((c, 1))
         (m0, m1), (n0, n1) = (
             (np.ravel(b[0]), np.ravel(b[1])) for b in (mean_bands[i], next_bands[i])
         )

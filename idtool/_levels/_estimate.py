@@ -33,7 +33,14 @@ import scipy.linalg
 import scipy.optimize
 
 from idtool._fit._result import Z95, Z_AT_BOUND
-from idtool._lawfit._profile import CHI2_95, TOO_FLAT, Side
+from idtool._lawfit._profile import (
+    CHI2_95,
+    CROSSING_TOL,
+    MAX_BISECTIONS,
+    TOO_FLAT,
+    Side,
+    line_crossing,
+)
 from idtool._levels._model import LevelsModel
 
 __all__ = ["SD_FLOOR", "SD_NAMES", "Optimum", "estimate", "profile_sides"]
@@ -333,15 +340,17 @@ def sign_of(k: int) -> float:
 
 
 def _walk(rise, z: float, sign: float, end: float, r_end: float) -> Side:
-    """Out from ``z`` to where the rise reaches 3.84 (bisected), or open at the edge."""
+    """Out from ``z`` to where the rise reaches 3.84 (bracketed by doubling steps, then
+    :func:`crossing`), or open at the edge."""
     inner, outer = z, None
+    r_inner, r_outer = 0.0, math.nan
     step = abs(end - z)
     at, r = end, r_end
     for _ in range(6):
         if r >= CHI2_95:
-            outer = at
+            outer, r_outer = at, r
             break
-        inner = at
+        inner, r_inner = at, r
         if abs(at) >= Z_AT_BOUND:
             return Side(sign * math.inf, r_end, "open")
         step *= 2.0
@@ -349,13 +358,24 @@ def _walk(rise, z: float, sign: float, end: float, r_end: float) -> Side:
         r = rise(at)
     if outer is None:
         if r >= CHI2_95:
-            outer = at
+            outer, r_outer = at, r
         else:
             return Side(sign * math.inf, r_end, "open")
-    for _ in range(6):
+    return Side(crossing(rise, inner, r_inner, outer, r_outer), r_end, "profile")
+
+
+def crossing(rise, inner: float, r_inner: float, outer: float, r_outer: float) -> float:
+    """Where ``rise`` reaches 3.84 between ``inner`` (below it) and ``outer`` (at or
+    above it): bisected to :data:`~idtool._lawfit._profile.CROSSING_TOL` on the internal
+    scale, then read off the line through the bracket's ends
+    (:func:`~idtool._lawfit._profile.line_crossing`, as ``fit-law``'s walk)."""
+    for _ in range(MAX_BISECTIONS):
+        if abs(outer - inner) <= CROSSING_TOL:
+            break
         mid = 0.5 * (inner + outer)
-        if rise(mid) >= CHI2_95:
-            outer = mid
+        r = rise(mid)
+        if r >= CHI2_95:
+            outer, r_outer = mid, r
         else:
-            inner = mid
-    return Side(0.5 * (inner + outer), r_end, "profile")
+            inner, r_inner = mid, r
+    return float(line_crossing(inner, r_inner, outer, r_outer))

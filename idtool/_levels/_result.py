@@ -290,6 +290,14 @@ class LevelsFit:
                 "can understate the band)"
             )
             plan = dataclasses.replace(plan, notes=(*plan.notes, note))
+        if self.alternates:
+            best = self.ranking[0]
+            note = (
+                f"planned on the best model ({best.name}, BIC weight {best.bic_weight:.2f}) "
+                f"alone: the fit's predictions average {1 + len(self.alternates)} models "
+                "by weight, so its band now can differ from the plan's"
+            )
+            plan = dataclasses.replace(plan, notes=(*plan.notes, note))
         return plan
 
     # ---------------------------------------------------------------- posterior

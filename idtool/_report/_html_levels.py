@@ -129,6 +129,17 @@ def _next_rows(fit: LevelsFit) -> str:
             "narrower band at stated conditions: idtool plan FITDIR --goal band --at "
             "LOAD,AMPLITUDE.</p>"
         )
+    if plan.values[-1] > 0.99 * plan.values[0]:
+        # e.g. one load and one amplitude: rows within the table's ranges repeat what it
+        # has, and a parameter it does not inform stays so
+        return (
+            f"<p>Goal: every physical parameter within a {100 * plan.target:g}% relative "
+            f"sd; now {100 * plan.values[0]:.3g}% at most. No row within the table's "
+            "ranges of load, amplitude and speed improves that by 1% (the largest stays "
+            f"{100 * plan.values[-1]:.3g}% after {PLAN_ROWS}): widen them, idtool plan "
+            "FITDIR --goal parameters --loads LO:HI --amplitudes LO:HI (other loads and "
+            "amplitudes inform the coupling law's shape; the plan says by how much).</p>"
+        )
     rows = [
         [str(r.rank), g(r.normal_load_n), g(r.amplitude_m * 1e6), g(r.sliding_speed_m_s * 1e3),
          f"{100 * r.value_after:.3g}%", f"{100 * u:.3g}%"]

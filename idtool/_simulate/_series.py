@@ -12,6 +12,18 @@ The force is the law's (:func:`idtool._model._series_force.series_force`) comput
 grid ``oversample`` times finer than the output (then decimated), so a fit at the
 output's rate does not reuse the simulator's discretisation; white Gaussian noise of
 sd ``noise_n`` [N] is added, from ``seed``.
+
+``departure`` adds what a real measuring chain does and the fit does not model (issue
+30's recovery study, ``benchmarks/study_benches.py``):
+
+* ``"coloured"``: the noise AR(1) with lag-one correlation 0.9 (same sd), as a load
+  cell's amplifier gives;
+* ``"hum"``: the coloured noise plus mains hum, a 60 Hz sine of amplitude
+  ``2 noise_n`` (random phase);
+* ``"drift"``: the coloured noise plus a load-cell offset drifting linearly from 0 to
+  ``5 noise_n`` over the record;
+* ``"lag"``: the force low-passed (first order, time constant 0.5 ms: a 320 Hz
+  bandwidth) before the white noise: a sensor not much faster than the sampling.
 """
 
 from __future__ import annotations
@@ -24,9 +36,12 @@ from idtool._data._series import Series
 from idtool._model._series_force import series_force
 from idtool._model._series_law import series_law
 
-__all__ = ["KINDS", "LUGRE_TRUTH", "simulate_series"]
+__all__ = ["KINDS", "LUGRE_TRUTH", "SERIES_DEPARTURES", "simulate_series"]
 
 KINDS = ("presliding", "sliding")
+SERIES_DEPARTURES = ("coloured", "hum", "drift", "lag")
+HUM_HZ = 60.0
+LAG_S = 0.5e-3
 # A LuGre contact of a small lab rig (after Canudas de Wit et al. 1995, with a viscous
 # term large enough to matter at these speeds): values by fit-law's parameter names.
 LUGRE_TRUTH: dict[str, float] = {
@@ -52,6 +67,7 @@ def simulate_series(
     normal_load_n: float | None = None,
     slip_input: str = "velocity",
     oversample: int = 8,
+    departure: str | None = None,
     seed: int = 0,
 ) -> Series:
     """A series of slip and friction force (module docstring).
@@ -69,10 +85,14 @@ def simulate_series(
         normal_load_n: a constant normal load [N] (then the level is ``mu``), or None.
         slip_input: ``"velocity"`` or ``"displacement"``: which the series carries.
         oversample: simulation grid over output grid.
+        departure: None (white noise) or one of :data:`SERIES_DEPARTURES` (module
+            docstring).
         seed: of the noise.
     """
     if kind not in KINDS:
         raise ValueError(f"kind {kind!r}: one of {KINDS}")
+    if departure is not None and departure not in SERIES_DEPARTURES:
+        raise ValueError(f"departure {departure!r}: None or one of {SERIES_DEPARTURES}")
     values = dict(truth or LUGRE_TRUTH)
     spec = series_law(law, with_load=normal_load_n is not None)
     values = {k: float(values[k]) for k in spec.names}
@@ -96,14 +116,41 @@ def simulate_series(
         extra_viscous_n_s_m=spec.extra_viscous_n_s_m(values),
         substeps=4,
     )
+    measured = np.asarray(force)
+    if departure == "lag":
+        # first-order sensor, exact for a force linear between the fine grid's samples
+        h = t[1] - t[0]
+        e = np.exp(-h / LAG_S)
+        c1 = 1.0 - LAG_S / h * (1.0 - e)  # weight of the step's end sample
+        lagged = np.empty_like(measured)
+        lagged[0] = measured[0]
+        for k in range(1, measured.size):
+            lagged[k] = e * lagged[k - 1] + (1.0 - e - c1) * measured[k - 1] + c1 * measured[k]
+        measured = lagged
     keep = slice(None, None, oversample)
     rng = np.random.default_rng(seed)
-    noisy = np.asarray(force)[keep] + noise_n * rng.standard_normal(t[keep].size)
+    t_out = t[keep]
+    n_out = t_out.size
+    white = rng.standard_normal(n_out)
+    if departure in ("coloured", "hum", "drift"):
+        phi = 0.9  # AR(1) at the output rate, stationary sd noise_n
+        coloured = np.empty(n_out)
+        coloured[0] = white[0]
+        for k in range(1, n_out):
+            coloured[k] = phi * coloured[k - 1] + np.sqrt(1.0 - phi**2) * white[k]
+        white = coloured
+    noisy = measured[keep] + noise_n * white
+    if departure == "hum":
+        noisy = noisy + 2.0 * noise_n * np.sin(
+            2.0 * np.pi * HUM_HZ * t_out + rng.uniform(0, 2 * np.pi)
+        )
+    if departure == "drift":
+        noisy = noisy + 5.0 * noise_n * (t_out - t_out[0]) / (t_out[-1] - t_out[0])
     return Series(
         time_s=t[keep],
         force_n=noisy,
         velocity_m_s=v[keep] if slip_input == "velocity" else None,
         displacement_m=x[keep] if slip_input == "displacement" else None,
         normal_load_n=None if normal_load_n is None else np.full(t[keep].size, load),
-        source=f"simulated {law} {kind} (seed {seed})",
+        source=f"simulated {law} {kind}{f' {departure}' if departure else ''} (seed {seed})",
     )
