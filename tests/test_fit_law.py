@@ -6,6 +6,7 @@ shared (about 20 s of compilation on a loaded 2-core machine, then ~1-4 s a fit)
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -235,3 +236,22 @@ def test_the_simulated_departures_are_what_they_say():
     assert drift[0] == pytest.approx(0.0, abs=1e-12) and drift[-1] == pytest.approx(0.05)
     with pytest.raises(ValueError, match="departure"):
         idtool.simulate_series("lugre", departure="wobble")
+
+
+def test_a_load_cell_offset_and_drift_are_fitted_not_read_as_friction():
+    """A tared cell 0.2 N off that drifts by 0.1 N over the record (20 and 10 noise sds,
+    a fifth and a tenth of Fc): fitted as the offset_n and drift_n nuisances, every LuGre
+    truth inside its interval; without them the offset would shift the Coulomb level's
+    two signs apart."""
+    series = idtool.simulate_series("lugre", kind="sliding", seed=11)
+    t = series.time_s
+    shifted = dataclasses.replace(
+        series, force_n=series.force_n + 0.2 + 0.1 * (t - t[0]) / (t[-1] - t[0])
+    )
+    fit = idtool.fit_law(shifted, "lugre")
+    for name, truth in TRUTH.items():
+        assert _inside(fit, name, truth), (name, fit.estimates[name])
+    nuisance = fit.to_json()["nuisance"]
+    assert nuisance["offset_n"] == pytest.approx(0.2, abs=0.01)
+    assert nuisance["drift_n"] == pytest.approx(0.1, abs=0.02)
+    assert abs(fit.noise_sd_n - 0.01) < 0.001

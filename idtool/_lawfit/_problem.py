@@ -4,7 +4,11 @@ The parameters live on the internal scale of :class:`idtool._model._params.Param
 bounded ``log`` transform for each physical one), plus, for a law of finite stiffness,
 the bristle force at the first sample as a fraction of the level there,
 ``fb0_fraction`` in (-1, 1) (a ``tanh`` nuisance: a measured series need not start at
-rest). The residuals are ``(F_model - F_measured) / force_scale``, whitened by an AR(1)
+rest), and the load cell's zero: an offset ``offset_n`` [N] and a linear drift
+``drift_n`` [N over the record] added to the model's force (``linear`` nuisances: a
+tared cell is off by a little, and warms over a long record; without them a drift of
+5 noise sds over a presliding record moved Kt out of its interval on 2 of 3 series).
+The residuals are ``(F_model - F_measured) / force_scale``, whitened by an AR(1)
 coefficient ``phi`` when the noise asks for it (Prais-Winsten: the first residual scaled
 by ``sqrt(1 - phi^2)``, then ``r_k - phi r_(k-1)``).
 """
@@ -25,7 +29,18 @@ from idtool._model._params import Param
 from idtool._model._series_force import series_force
 from idtool._model._series_law import SeriesLaw, scale_of, scaled, series_law
 
-__all__ = ["FB0", "Data", "Model", "Problem", "batch_loss", "make_problem", "start_grid", "whiten"]
+__all__ = [
+    "DRIFT",
+    "FB0",
+    "OFFSET",
+    "Data",
+    "Model",
+    "Problem",
+    "batch_loss",
+    "make_problem",
+    "start_grid",
+    "whiten",
+]
 
 FB0 = Param(
     "fb0_fraction",
@@ -36,6 +51,15 @@ FB0 = Param(
     start=0.0,
     description="bristle force at the first sample over the level there",
 )
+# the load cell's zero: declared in units of the series' force scale (scale_of)
+OFFSET = Param(
+    "offset_n", "N", "linear", centre=0.0, scale=1.0, start=0.0,
+    description="load-cell offset added to the force",
+)  # fmt: skip
+DRIFT = Param(
+    "drift_n", "N", "linear", centre=0.0, scale=1.0, start=0.0,
+    description="load-cell drift over the record, linear in time",
+)  # fmt: skip
 _Z_START = 3.0  # |z| of a start at most: 95% of the way to a bound
 SUBSTEPS = 4  # parts per sample interval: LuGre's error 3.6e-6 N of 1.25 N at 1 kHz
 
@@ -78,14 +102,15 @@ class Model:
         return {p.name: data.scales[k] * p.value(z[k]) for k, p in enumerate(self.params)}
 
     def force(self, data: Data, z):
-        """Friction force [N] and bristle force [N] at the samples, at internal ``z``."""
+        """Force [N] (friction plus the load cell's zero) and bristle force [N] at the
+        samples, at internal ``z``."""
         values = self.values(data, z)
         law_values = {k: values[k] for k in self.law.names}
         v, load = data.velocity_m_s, data.normal_load_n
         fb0 = 0.0
-        if len(self.params) > self.n_physical:
+        if FB0.name in values:
             fb0 = values[FB0.name] * self.law.law_at(law_values, load[0]).level_n(v[0])
-        return series_force(
+        force, bristle = series_force(
             self.law.law_at,
             law_values,
             data.time_s,
@@ -96,6 +121,9 @@ class Model:
             extra_viscous_n_s_m=self.law.extra_viscous_n_s_m(law_values),
             substeps=SUBSTEPS,
         )
+        t = data.time_s
+        zero = values[OFFSET.name] + values[DRIFT.name] * (t - t[0]) / (t[-1] - t[0])
+        return force + zero, bristle
 
     def residuals(self, data: Data, z, phi=0.0):
         """Scaled (and whitened) residuals ``(F_model - F) / force_scale``."""
@@ -165,7 +193,7 @@ def make_problem(series: Series, law: str) -> Problem:
     spec = series_law(law, with_load=series.normal_load_n is not None)
     starts = {p.name: p.start for p in spec.params}
     rigid = not np.isfinite(float(spec.law_at(starts, 1.0).stiffness_n_m()))
-    declared = spec.params if rigid else (*spec.params, FB0)
+    declared = (*spec.params, *(() if rigid else (FB0,)), OFFSET, DRIFT)
     scales = np.array([scale_of(p.name, f_scale, v_scale) for p in declared])
     t = series.time_s
     load = np.ones_like(t) if series.normal_load_n is None else series.normal_load_n

@@ -121,7 +121,7 @@ def series_law(name: str, *, with_load: bool) -> SeriesLaw:
 def scale_of(name: str, force_scale_n: float, velocity_scale_m_s: float) -> float:
     """The factor from a parameter's declared value to its value in SI units on a series
     whose force and velocity reach about ``force_scale_n`` and ``velocity_scale_m_s``."""
-    if name == "Fc":
+    if name in ("Fc", "offset_n", "drift_n"):
         return force_scale_n
     if name in ("sigma1", "sigma2"):
         return force_scale_n / velocity_scale_m_s
@@ -133,8 +133,9 @@ def scaled(param: Param, factor: float) -> Param:
     if factor == 1.0:
         return param
     return dataclasses.replace(
-        param, lo=param.lo * factor, hi=param.hi * factor, start=param.start * factor
-    )
+        param, lo=param.lo * factor, hi=param.hi * factor, start=param.start * factor,
+        centre=param.centre * factor, scale=param.scale * factor,
+    )  # fmt: skip
 
 
 # Declared on the series' scales (scale_of): Fc over the force scale, the sigmas over
