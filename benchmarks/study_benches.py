@@ -11,7 +11,8 @@ and the load-power law, BIC choosing) and the right direction. Scored: Kt and mu
 inside their 95% intervals (an interval stated one-sided runs to the range's end, as
 the report states it), the median Kt / truth, the mean band's coverage of the true FR
 at three held-out conditions inside the tested range (with a fresh discrepancy draw,
-as a new condition has), and how often BIC chose the load-power law.
+as a new condition has), how often BIC chose the load-power law, and how often the
+check against free slip amplitudes rejected the law's shape (idtool/_levels/_free.py).
 
 Series (``idtool.simulate_series``: LuGre, 3 s at 1 kHz, noise 0.01 N; presliding and
 sliding), for each departure (none: white noise; AR(1) noise; mains hum; load-cell
@@ -19,10 +20,12 @@ drift; sensor lag), fitted by ``idtool.fit_law`` with its defaults. Scored: each
 parameter inside its 95% interval, and how often the fit stated it one-sided or weakly
 identified.
 
-    .venv/bin/python benchmarks/study_benches.py --seeds 8 --series-kinds sliding  # ~9 min
+    .venv/bin/python benchmarks/study_benches.py --seeds 8 --series-kinds sliding  # ~30 min
+    .venv/bin/python benchmarks/study_benches.py --only tables --directions along \
+        --departures none,sublinear-coupling --seeds 4
     .venv/bin/python benchmarks/study_benches.py --only series --series-kinds presliding --seeds 3
 
-(2 workers; a presliding fit takes 30-60 s, a sliding one 1 s, a table 1-5 s.)
+(2 workers; a presliding fit takes about 50 s alone, a sliding one 2 s, a table 7-9 s.)
 
 Each fit's row is printed as it finishes (and appended to ``--rows``, JSON lines); the
 tables at the end are those quoted in docs/how-to/levels-table.md and fit-law.md.
@@ -80,6 +83,7 @@ def table_row(direction: str, departure: str | None, seed: int) -> dict:
         "Kt_ratio": fit.estimates["Kt"].estimate / truth["Kt"],
         "Kt_statement": fit.estimates["Kt"].statement,
         "coupling": fit.model.coupling,
+        "shape_p": None if fit.coupling_check is None else fit.coupling_check.p_value,
         "held_out": held,
         "seconds": seconds,
     }
@@ -113,8 +117,8 @@ def _tables_summary(rows: list[dict]) -> None:
     for r in rows:
         groups[(r["direction"], r["departure"])].append(r)
     print("\n| direction | departure | Kt in 95% | mu in 95% | median Kt / truth | held-out FR "
-          "in mean band | load-power chosen | s per fit |")  # fmt: skip
-    print("|---|---|---|---|---|---|---|---|")
+          "in mean band | load-power chosen | law's shape rejected | s per fit |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|---|")
     for (d, dep), rs in sorted(groups.items(), key=lambda kv: (DIRECTIONS.index(kv[0][0]),)):
         n = len(rs)
         held = [h for r in rs for h in r["held_out"]]
@@ -123,6 +127,7 @@ def _tables_summary(rows: list[dict]) -> None:
             f"| {sum(r['inside']['mu'] for r in rs)}/{n} "
             f"| {np.median([r['Kt_ratio'] for r in rs]):.2f} "
             f"| {sum(held)}/{len(held)} | {sum(r['coupling'] == 'load-power' for r in rs)}/{n} "
+            f"| {sum((r.get('shape_p') or 1.0) < 0.05 for r in rs)}/{n} "
             f"| {np.median([r['seconds'] for r in rs]):.1f} |"
         )
 
@@ -150,15 +155,17 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--only", choices=("tables", "series"), default=None)
     ap.add_argument("--series-kinds", default="presliding,sliding")
+    ap.add_argument("--directions", default=",".join(DIRECTIONS))
+    ap.add_argument("--departures", default=",".join(d or "none" for d in TABLE_CASES))
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--rows", default="study_benches_rows.jsonl")
     args = ap.parse_args()
     jobs = []
     if args.only in (None, "tables"):
         jobs += [
-            (table_row, (d, dep, s))
-            for d in DIRECTIONS
-            for dep in TABLE_CASES
+            (table_row, (d, None if dep == "none" else dep, s))
+            for d in args.directions.split(",")
+            for dep in args.departures.split(",")
             for s in range(args.seeds)
         ]
     if args.only in (None, "series"):

@@ -222,6 +222,7 @@ FILE_SECONDS: dict[str, float] = {
     "tests/test_arrowhead.py": 38,
     "tests/test_parameter_settings.py": 36,
     "tests/test_levels_table.py": 110,
+    "tests/test_levels_coupling_check.py": 150,
     "tests/test_ridge_jump.py": 35,
     "tests/test_predict.py": 34,
     "tests/test_cov_blocks.py": 31,

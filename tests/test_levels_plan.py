@@ -76,8 +76,16 @@ def test_the_plan_expects_what_its_rows_achieve(seed):
     fit = idtool.fit_levels(table, coupling="power-limited", seed=seed)
     plan = fit.plan("band", 6, at=[TARGET], half_width=0.005)
     # (to 1e-3: the planner's weak prior on theta, sd 7 internal units, which the fit's
-    # covariance has not: 1e-4 on seed 0)
-    assert plan.values[0] == pytest.approx(half_width(fit, *TARGET), rel=1e-3)
+    # covariance has not: 1e-4 on seed 0). Where the table leaves a parameter one-sided
+    # (seed 0's power_load_n, not bounded above: P -> inf is the constant law, and every
+    # alpha N of the table lies below it), predict widens the band to its interval's end
+    # and the linear model cannot: the plan says so and its band is the narrower
+    loose = [n for n, e in fit.estimates.items() if e.one_sided or e.weakly_identified]
+    if loose:
+        assert any("not bounded on both sides" in n for n in plan.notes), plan.notes
+        assert plan.values[0] <= half_width(fit, *TARGET) * (1 + 1e-3)
+    else:
+        assert plan.values[0] == pytest.approx(half_width(fit, *TARGET), rel=1e-3)
     assert len(plan.rows) == 6 and all(np.diff(plan.values) <= 1e-12)
     assert plan.values[-1] <= plan.uniform[-1]
     refit = idtool.fit_levels(

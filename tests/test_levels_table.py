@@ -162,7 +162,12 @@ def test_recovery_truth_inside_the_95_intervals_of_kt_and_mu():
     assert abs(fit.estimates["Kt"].estimate / TRUTH["Kt"] - 1) < 0.4
     sds = fit.optimum.sds  # repeats: scatter and discrepancy apart
     assert 0.015 < sds["scatter_fr"] < 0.05 and 0.01 < sds["scatter_mu"] < 0.04
-    assert not any("cannot pin" in w for w in fit.warnings)
+    # Kt and mu pinned; the power limit's load scale may not be bounded above (P -> inf
+    # is the constant law, and the table's alpha N stay below the truth's 300 N): its
+    # profile stays below a rise of 3.84 up there, which the Wald end (a rise of 1-3)
+    # hid before Wald ends needed a rise of 3 (idtool._lawfit._profile.TOO_FLAT)
+    pinned = [w for w in fit.warnings if "cannot pin" in w]
+    assert all("cannot pin power_load_n:" in w for w in pinned), pinned
     # predictions: at a tabled condition the band holds the truth's FR
     p = fit.predict(50.0, [0.02, 0.08], amplitude_m=4e-6)
     assert p.pinned.all() and np.all(p.mean_band[0] < p.fr) and np.all(p.fr < p.mean_band[1])
@@ -302,9 +307,14 @@ def test_a_coupling_falling_with_the_load_is_caught_by_the_two_speeds_by_default
     holds the truth (benchmarks/study_benches.py)."""
     table = simulate_table(0, departure="load-coupling", truth={**TRUTH, "coupling_gain": 0.6})
     alone = idtool.fit_levels(table, coupling="power-limited")
-    lo, hi = alone.estimates["Kt"].ci95
-    assert not lo <= TRUTH["Kt"] <= hi, alone.estimates["Kt"].statement
+    own = alone._law_estimates()["Kt"]  # the law's own interval, before the check
+    assert not own.ci95[0] <= TRUTH["Kt"] <= own.ci95[1], own.statement
     assert any("misses the conditions" in w for w in alone.warnings)  # it did warn
+    # and the free slip amplitudes reject its shape: Kt widened to hold the truth
+    # (tests/test_levels_coupling_check.py)
+    assert alone.coupling_check is not None and alone.coupling_check.rejected
+    lo, hi = alone.estimates["Kt"].ci95
+    assert lo <= TRUTH["Kt"] <= hi, alone.estimates["Kt"].statement
     fit = idtool.fit_levels(table)
     assert fit.ranking[0].name == "load-power" and len(fit.ranking) == 2
     assert fit.ranking[0].bic_weight > 0.99

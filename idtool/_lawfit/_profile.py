@@ -15,6 +15,7 @@ sides of a stage run as one vmapped batch of LM refits.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -27,12 +28,18 @@ __all__ = [
     "MAX_BISECTIONS",
     "TOO_FLAT",
     "Side",
+    "json_number",
     "line_crossing",
     "profile_intervals",
 ]
 
 CHI2_95 = 3.84
-TOO_FLAT = 1.0
+# A Wald end where -2 log L rises by less than this is walked out to 3.84: the profile
+# is flatter there than the Wald interval assumes (a rise of 3.0 at the Wald end puts
+# the profile's own end at most ~13% further out, if it stays that flat). At 1.0, a
+# transverse table's Kt rose 1.5 at its Wald end, stayed below 2.5 for two decades
+# beyond it, and the stated [7e6, 3.3e7] N/m missed the truth 2e6.
+TOO_FLAT = 3.0
 _DOUBLINGS = 5
 # A profile's end is bisected until its bracket is this wide on the internal scale
 # (0.015 decades of Kt near the middle of its range, where d log10 Kt / dz is largest),
@@ -66,6 +73,21 @@ class Side:
     z: float
     wald_rise: float
     method: str
+
+    def to_json(self) -> list:
+        """``[z, wald_rise, method]``, an infinite number as ``"inf"`` or ``"-inf"``
+        (JSON has none): how a fit file stores a side."""
+        return [json_number(self.z), json_number(self.wald_rise), self.method]
+
+    @classmethod
+    def from_json(cls, entry: list) -> Side:
+        """The side :meth:`to_json` wrote."""
+        return cls(float(entry[0]), float(entry[1]), str(entry[2]))
+
+
+def json_number(x: float) -> float | str:
+    """A float for JSON: an infinite one as "inf" or "-inf"."""
+    return float(x) if math.isfinite(x) else ("inf" if x > 0 else "-inf")
 
 
 def profile_intervals(lm, opt: Optimum, n_physical: int) -> list[tuple[Side, Side]]:

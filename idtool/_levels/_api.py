@@ -16,6 +16,7 @@ from idtool._fit._variability import MISFIT, MISSPECIFIED_SD
 from idtool._lawfit._result import estimate_from_sides
 from idtool._levels._choice import kept, label, options, rank, table_bic
 from idtool._levels._estimate import SD_FLOOR, SD_NAMES, estimate, profile_sides
+from idtool._levels._free import check_coupling
 from idtool._levels._model import DEFAULT_LAW, LevelsModel, levels_model
 from idtool._levels._result import LevelsFit
 from idtool._model._names import BY_DESIGN, DEFAULT_DIRECTION
@@ -26,6 +27,7 @@ _NULL_LOADING = 0.1  # a parameter this much in an uninformed direction is not p
 # below this BIC weight the chosen model shares the evidence: said so (as the trace fit's
 # comparable_warning: the others hold more than 5%)
 COMPARABLE = 0.95
+CANNOT_PIN = "the table cannot pin"
 
 
 def fit_levels(
@@ -78,7 +80,7 @@ def fit_levels(
     )
     pairs = options(coupling, direction, speed_resolved=resolved)
     if len(pairs) == 1:
-        return _fit_one(table, law, *pairs[0], seed, start)
+        return _checked(_fit_one(table, law, *pairs[0], seed, start), seed, start)
     fits = [_fit_one(table, law, c, d, seed, start) for c, d in pairs]
     varied = (("coupling", {c for c, _ in pairs}), ("direction", {d for _, d in pairs}))
     compared = [name for name, values in varied if len(values) > 1]
@@ -118,10 +120,66 @@ def fit_levels(
             f"biased narrow; add conditions or repeats before choosing a {compared[0]} "
             "from this table",
         )
+    best = dataclasses.replace(
+        best, ranking=tuple(ranking), alternates=alternates, warnings=warnings
+    )
+    return _checked(best, seed, start)
+
+
+def _checked(fit: LevelsFit, seed: int, start: float) -> LevelsFit:
+    """``fit`` with its coupling law's shape checked against free slip amplitudes
+    (:mod:`idtool._levels._free`); where the table rejects the shape, the friction
+    law's parameters' intervals widened to hold their law-free ones, and said so."""
+    check = check_coupling(fit.model, fit.optimum, seed)
+    if check is None:
+        return dataclasses.replace(fit, seconds=time.perf_counter() - start)
+    test = (
+        f"-2 log likelihood ratio {check.statistic:.1f}, F on {check.dof} and "
+        f"{check.residual_dof} degrees of freedom, p = {check.p_value:.2g}"
+    )
+    if not check.rejected:
+        note = (
+            f"the {check.coupling} law's shape was checked against a free slip amplitude at "
+            f"each of the {check.points} load-amplitude points ({check.resolved} at two or "
+            f"more speeds): not rejected ({test})"
+        )
+        return dataclasses.replace(
+            fit, coupling_check=check, notes=(*fit.notes, note),
+            seconds=time.perf_counter() - start,
+        )  # fmt: skip
+    estimates, sides, widened = dict(fit.estimates), dict(fit.sides), []
+    names = fit.model.names
+    for name, (flo, fhi) in check.free.items():
+        lo, hi = fit.sides[name]
+        new_lo = flo if flo.z < lo.z else lo
+        new_hi = fhi if fhi.z > hi.z else hi
+        if (new_lo, new_hi) == (lo, hi):
+            continue
+        j = names.index(name)
+        p = fit.model.params[j]
+        sides[name] = (new_lo, new_hi)
+        estimates[name] = estimate_from_sides(
+            p, float(fit.optimum.theta[j]), math.inf, new_lo, new_hi
+        )
+        widened.append(name)
+    check = dataclasses.replace(
+        check, widened=tuple(widened), law_sides={n: fit.sides[n] for n in widened}
+    )
+    said = "; ".join(f"{n} {estimates[n].statement}" for n in widened) or "none needed widening"
+    warning = (
+        f"the table rejects the {check.coupling} law's shape against a free slip amplitude "
+        f"at each of its {check.points} load-amplitude points ({test}): Kt and the friction "
+        "law are read through a coupling the data do not follow; their intervals now hold "
+        f"what the speeds say without a coupling law ({said}); the bands stay the law's, "
+        "its discrepancy carrying the misfit"
+    )
+    widened_fit = dataclasses.replace(fit, estimates=estimates, sides=sides, coupling_check=check)
+    # the unpinned-parameters warning restated with the intervals as now stated
+    fresh = [w for w in _diagnose(widened_fit)[0] if w.startswith(CANNOT_PIN)]
+    kept = [w for w in fit.warnings if not w.startswith(CANNOT_PIN)]
     return dataclasses.replace(
-        best, ranking=tuple(ranking), alternates=alternates, warnings=warnings,
-        seconds=time.perf_counter() - start,
-    )  # fmt: skip
+        widened_fit, warnings=(*fresh, *kept, warning), seconds=time.perf_counter() - start
+    )
 
 
 def _criteria(fit: LevelsFit) -> tuple[float, float]:
@@ -166,7 +224,7 @@ def _diagnose(fit: LevelsFit) -> tuple[tuple[str, ...], tuple[str, ...]]:
         n_coupling = len(model.params) - names.index("mu") - 1
         listed = "; ".join(f"{n} {fit.estimates[n].statement}" for n in loose)
         text = (
-            f"the table cannot pin {', '.join(loose)}: {t.operating_points[1].size} "
+            f"{CANNOT_PIN} {', '.join(loose)}: {t.operating_points[1].size} "
             f"condition(s), {len(points)} load-amplitude point(s) at {speeds} speed(s), "
             f"for {len(names)} parameters ({listed})"
         )

@@ -27,8 +27,8 @@ import numpy as np
 
 from idtool._atomic import atomic_output_dir
 from idtool._errors import IdtoolError
+from idtool._lawfit._profile import json_number as _json_number
 from idtool._levels._result import LevelsFit
-from idtool._levels._result import _num as _json_number
 from idtool._version import __version__
 
 __all__ = ["TableComparison", "compare_tables"]

@@ -19,7 +19,7 @@ whitened residuals ``C^-1/2 (y - g(theta))``) at starting sds, then alternately 
 by restricted maximum likelihood (REML, theta profiled on the linearised model) and
 theta by generalised least squares, until the sds settle. Intervals: each parameter's
 Wald interval checked against its profile (the others refitted, the sds held), as
-:mod:`idtool._lawfit._profile` does: a side where ``-2 log L`` rises by less than 1 is
+:mod:`idtool._lawfit._profile` does: a side where ``-2 log L`` rises by less than 3 is
 walked out to a rise of 3.84, or to the parameter's range (then open).
 """
 
@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
+from typing import Any, Protocol
 
 import numpy as np
 import scipy.linalg
@@ -41,9 +43,9 @@ from idtool._lawfit._profile import (
     Side,
     line_crossing,
 )
-from idtool._levels._model import LevelsModel
+from idtool._model._params import Param
 
-__all__ = ["SD_FLOOR", "SD_NAMES", "Optimum", "estimate", "profile_sides"]
+__all__ = ["SD_FLOOR", "SD_NAMES", "Optimum", "TableModel", "estimate", "profile_sides"]
 
 SD_NAMES = ("scatter_mu", "scatter_fr", "discrepancy_fr")
 SD_FLOOR = 1e-3  # relative: 0.1%
@@ -52,6 +54,24 @@ NULL_EIG = 1e-8  # an eigenvalue of the scaled information below this: not infor
 _DRAWS = 400  # random points screened by their cost (one model evaluation each)
 _STARTS = 12  # the best of them, each taken to its optimum
 _ROUNDS = 8
+
+
+class TableModel(Protocol):
+    """What the stages read of a table's model: the law's
+    (:class:`~idtool._levels._model.LevelsModel`) or the law-free one
+    (:class:`~idtool._levels._free.FreeAmplitudeModel`)."""
+
+    @property
+    def table(self) -> Any: ...
+
+    @property
+    def params(self) -> tuple[Param, ...]: ...
+
+    def log_levels(self, theta) -> Any: ...
+
+    def jacobian(self, theta) -> Any: ...
+
+    def internal(self, **values: float) -> np.ndarray: ...
 
 
 @dataclasses.dataclass(frozen=True)
@@ -84,7 +104,7 @@ class Optimum:
     restricted: bool = True
 
 
-def _data(model: LevelsModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _data(model: TableModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``y`` (2 n,), the measurement covariance ``M`` and the condition matrix ``K``."""
     t = model.table
     n = t.n_rows
@@ -142,7 +162,7 @@ def _solve(model, y, c, theta0, fixed=None):
     return full(res.x), float(2.0 * res.cost)
 
 
-def _starts(model: LevelsModel, rng: np.random.Generator) -> list[np.ndarray]:
+def _starts(model: TableModel, rng: np.random.Generator) -> list[np.ndarray]:
     """Seeded random points: each parameter log-uniform in its start box (or at its start),
     mu from the OFF levels, the coupling gain placed so that the velocity ratio at the
     fastest condition lies below 1 (no start on the flat FR = 1 plateau)."""
@@ -232,8 +252,11 @@ def _alternate(model, y, m, kmat, active, theta, restricted):
     return theta, log_sds
 
 
-def estimate(model: LevelsModel, seed: int = 0) -> Optimum:
-    """Stages of the module docstring; returns the :class:`Optimum`."""
+def estimate(
+    model: TableModel, seed: int = 0, starts: Sequence[np.ndarray] | None = None
+) -> Optimum:
+    """Stages of the module docstring; returns the :class:`Optimum`. ``starts``
+    (internal theta) replace the seeded multi-start's random points."""
     y, m, kmat = _data(model)
     index, first = model.table.operating_points
     separable = bool(index.size > first.size)
@@ -249,7 +272,7 @@ def estimate(model: LevelsModel, seed: int = 0) -> Optimum:
         w = scipy.linalg.solve_triangular(chol, r, lower=True)
         return float(w @ w) if np.all(np.isfinite(w)) else math.inf
 
-    draws = sorted(_starts(model, rng), key=cost)[:_STARTS]
+    draws = sorted(_starts(model, rng) if starts is None else starts, key=cost)[:_STARTS]
     best = min((_solve(model, y, c, s) for s in draws), key=lambda x: x[1])
     theta = best[0]
     # REML needs residual degrees of freedom among the friction ratios: with as many
@@ -291,7 +314,7 @@ def estimate(model: LevelsModel, seed: int = 0) -> Optimum:
     )
 
 
-def profile_sides(model: LevelsModel, opt: Optimum, j: int) -> tuple[Side, Side, np.ndarray]:
+def profile_sides(model: TableModel, opt: Optimum, j: int) -> tuple[Side, Side, np.ndarray]:
     """Parameter ``j``'s interval sides (module docstring), internal scale, and theta
     refitted at each end (2, k) (at the range's edge for an open side): what
     predictions read where the table does not pin the parameter."""

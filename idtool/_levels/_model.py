@@ -44,6 +44,7 @@ __all__ = [
     "fr_points",
     "levels_model",
     "log_levels",
+    "log_off",
 ]
 
 DEFAULT_LAW = "dahl"  # as idtool.fit's
@@ -98,13 +99,16 @@ def fr_points(spec: LevelsSpec, a_ref, theta, n, alpha, v, f):
     return jax.vmap(one)(*flat).reshape(shape)
 
 
+def log_off(spec: LevelsSpec, data: LevelsData, vals: dict[str, Any]):
+    """Log OFF level of every row (n,): force [N], or coefficient (minus log N)."""
+    off = jax.vmap(lambda n, v: spec.law.at_load(vals, n).off_force_n(v))(data.row_n, data.row_v)
+    return jnp.log(off) - data.coefficient * jnp.log(data.row_n)
+
+
 def log_levels(spec: LevelsSpec, data: LevelsData, theta):
     """Log OFF of every row, then log FR (2 n,): the module docstring's equations."""
-    vals = _values(spec, theta)
-    off = jax.vmap(lambda n, v: spec.law.at_load(vals, n).off_force_n(v))(data.row_n, data.row_v)
-    log_off = jnp.log(off) - data.coefficient * jnp.log(data.row_n)
     fr = fr_points(spec, data.a_ref, theta, data.n, data.alpha, data.v, data.f)[data.gather]
-    return jnp.concatenate([log_off, jnp.log(fr)])
+    return jnp.concatenate([log_off(spec, data, _values(spec, theta)), jnp.log(fr)])
 
 
 # compiled once per model and shape, for every table (they were closures over each

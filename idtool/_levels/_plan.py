@@ -239,13 +239,13 @@ def plan_rows(
     noise = max(noise, 1e-12)
     # each candidate's discrepancy column in cov (-1: a condition without rows yet)
     column = np.array([table_keys.get(_key(a, b, f0, c), -1) for a, b, c in cand])
+    # d(relative value)/dz: the parameters goal's precision relative to the value; a
+    # parameter whose range reaches zero (the load-power law's exponent, which can be
+    # negative: its log failed) taken in its own unit instead, as relative to 1
     dlog = np.array(
         [
-            (
-                math.log(prm.value(float(theta[j]) + 1e-6))
-                - math.log(prm.value(float(theta[j]) - 1e-6))
-            )
-            / 2e-6
+            float(prm.slope(float(theta[j])))
+            / (abs(float(prm.value(float(theta[j])))) if _positive(prm) else 1.0)
             for j, prm in enumerate(model.params)
         ]
     )
@@ -320,7 +320,16 @@ def plan_rows(
         )
         for r, i in enumerate(chosen)
     )
+    signed = [p.name for p in model.params if not _positive(p)]
     notes = (
+        *(
+            [
+                f"{', '.join(signed)}: its range reaches zero, so its sd is taken in its own "
+                "unit (relative to 1), not relative to its value"
+            ]
+            if goal == "parameters" and signed
+            else []
+        ),
         "linearised at the fit's estimate; the sds at their estimates (not averaged over "
         "their uncertainty, as the trace planner does)",
         "a new row's OFF level is left out (mu is pinned by the table already); its FR "
@@ -344,3 +353,8 @@ def plan_rows(
         at=tuple((n, a, v) for n, a, v in targets),
         notes=notes,
     )
+
+
+def _positive(param) -> bool:
+    """A parameter whose range is positive (a relative sd means something)."""
+    return param.kind == "log" or (param.kind == "tanh" and param.lo > 0.0)

@@ -17,8 +17,10 @@ from idtool._errors import IdtoolError
 from idtool._fit._result import Estimate
 from idtool._fit._run import ChoiceWeight
 from idtool._lawfit._profile import Side
+from idtool._lawfit._result import estimate_from_sides
 from idtool._levels._choice import pool
 from idtool._levels._estimate import SD_FLOOR, SD_NAMES, Optimum, _cov, _data
+from idtool._levels._free import CouplingCheck
 from idtool._levels._model import LevelsModel
 from idtool._levels._plan import LevelsPlan, plan_rows
 from idtool._levels._sample import LevelsPosterior, sample_table
@@ -84,11 +86,6 @@ class LevelsPrediction:
         return out
 
 
-def _num(x: float) -> float | str:
-    """A float for JSON: an infinite side as "inf" or "-inf"."""
-    return float(x) if math.isfinite(x) else ("inf" if x > 0 else "-inf")
-
-
 @dataclasses.dataclass(frozen=True)
 class LevelsFit:
     """Kt, mu and the coupling fitted to a steady-state friction table
@@ -110,6 +107,9 @@ class LevelsFit:
             model's BIC and weight, this one first (empty otherwise).
         alternates: the other models of BIC weight >= 0.001, in the ranking's order:
             the predictions average them with this one by weight.
+        coupling_check: the coupling law's shape against free slip amplitudes
+            (:mod:`idtool._levels._free`), where the table has more load-amplitude
+            points than the law has parameters; None otherwise.
     """
 
     model: LevelsModel
@@ -126,6 +126,7 @@ class LevelsFit:
     # and the others kept for the predictions (BIC weight >= MIN_LAW_WEIGHT), in order
     ranking: tuple[ChoiceWeight, ...] = ()
     alternates: tuple[LevelsFit, ...] = dataclasses.field(default=(), compare=False)
+    coupling_check: CouplingCheck | None = None
 
     @property
     def table(self):
@@ -214,7 +215,7 @@ class LevelsFit:
         # a direction the data leave open that is flat at the estimate (a load scale
         # far above every load of the table)
         low, high = fr.copy(), fr.copy()
-        for name, e in self.estimates.items():
+        for name, e in self._law_estimates().items():
             if e.one_sided or e.weakly_identified:
                 for theta_end in self.ends[name]:
                     at_end = np.asarray(self.model.fr_at(theta_end, n, alpha, v, f))
@@ -226,6 +227,21 @@ class LevelsFit:
             return np.where(pinned, lo, np.nan), np.where(pinned, hi, np.nan)
 
         return LevelsPrediction(n, a, v, f, fr, band(mean_sd), band(next_sd), pinned)
+
+    def _law_estimates(self) -> dict[str, Estimate]:
+        """The estimates as the law states them: a parameter the coupling check widened
+        (its law-free ends, where the table rejects the law) with the law's own sides,
+        which its predictions read (the law's discrepancy carries the misfit)."""
+        check = self.coupling_check
+        if check is None or not check.widened:
+            return self.estimates
+        out = dict(self.estimates)
+        for name, (lo, hi) in check.law_sides.items():
+            j = self.model.names.index(name)
+            out[name] = estimate_from_sides(
+                self.model.params[j], float(self.optimum.theta[j]), math.inf, lo, hi
+            )
+        return out
 
     def _predict_posterior(self, n, a, v, f, seed: int = 0) -> LevelsPrediction:
         """FR from the posterior's draws: the median of the model's FR, the mean band
@@ -280,7 +296,7 @@ class LevelsFit:
             sds, goal, n_rows, at=at, half_width=half_width, rel=rel, loads_n=loads_n,
             amplitudes_m=amplitudes_m, speeds_m_s=speeds_m_s, grid=grid,
         )  # fmt: skip
-        loose = [n for n, e in self.estimates.items() if e.one_sided or e.weakly_identified]
+        loose = [n for n, e in self._law_estimates().items() if e.one_sided or e.weakly_identified]
         if loose:
             # predict widens its bands to these parameters' interval ends; the linear
             # model cannot (a seed of tests/test_levels_plan.py's table: 0.056 for 0.076)
@@ -346,6 +362,16 @@ class LevelsFit:
             e = self.estimates.get(name)
             fit_text = f"   fit {e.estimate:.4g} {e.statement}" if e is not None else ""
             lines.append(f"  {name:15s} {s['median']:<11.4g} [{lo:.4g}, {hi:.4g}]{fit_text}")
+        check = self.coupling_check
+        if check is not None and check.widened:
+            lines += [
+                "",
+                "[[Warning]] the table rejects the "
+                f"{check.coupling} law's shape (p = {check.p_value:.2g} against free slip "
+                f"amplitudes): the posterior of {', '.join(check.widened)} is the law's, "
+                "conditional on that shape; the fit's interval, widened to the law-free "
+                "one, is what the table says",
+            ]
         record = post.record
         if record is not None:
             lines += ["", "[[Convergence]]", record.diagnostics.report()]
@@ -417,6 +443,19 @@ class LevelsFit:
         ]
         for name, e in self.estimates.items():
             lines.append(f"  {name:15s} {e.estimate:<12.5g} {e.unit:4s} {e.statement}")
+        check = self.coupling_check
+        if check is not None:
+            lines += [
+                "",
+                f"[[Coupling law's shape]] against a free slip amplitude at each of "
+                f"{check.points} load-amplitude points ({check.resolved} at two or more speeds)",
+                f"  -2 log likelihood ratio {check.statistic:.2f}, F on {check.dof} and "
+                f"{check.residual_dof} degrees of freedom, p = {check.p_value:.3g}: "
+                + ("rejected at 5%, intervals widened" if check.rejected else "not rejected"),
+            ]
+            for name, (lo, hi) in check.free.items():
+                e = estimate_from_sides(m.params[m.names.index(name)], 0.0, math.inf, lo, hi)
+                lines.append(f"  {name:15s} law-free {e.statement}")
         lines += [
             "",
             f"[[Scatter and discrepancy]] (relative sds, {'REML' if o.restricted else 'ML'})",
@@ -491,11 +530,13 @@ class LevelsFit:
             # the models kept for the predictions (each a document of this form)
             "models_compared": [w.to_dict("model") for w in self.ranking],
             "alternates": [a.to_json(command) for a in self.alternates],
+            "coupling_check": None
+            if self.coupling_check is None
+            else self.coupling_check.to_dict(),
             # what idtool.load_levels_fit rebuilds the fit from (internal scale)
             "state": {
                 "sides": {
-                    name: [[_num(s.z), _num(s.wald_rise), s.method] for s in self.sides[name]]
-                    for name in self.estimates
+                    name: [side.to_json() for side in self.sides[name]] for name in self.estimates
                 },
                 "ends": {name: self.ends[name].tolist() for name in self.estimates},
                 "null": o.null.tolist(),

@@ -18,6 +18,7 @@ from idtool._lawfit._profile import Side
 from idtool._lawfit._result import estimate_from_sides
 from idtool._levels._api import fit_levels
 from idtool._levels._estimate import SD_NAMES, Optimum, _cov, _data
+from idtool._levels._free import CouplingCheck
 from idtool._levels._model import levels_model
 from idtool._levels._result import FIT_JSON, POSTERIOR_NC, LevelsFit
 from idtool._levels._sample import TABLE, LevelsPosterior
@@ -42,10 +43,6 @@ def not_for_tables(folder: str | Path, what: str) -> IdtoolError:
         "bench traces only, not (yet) on a table's; on a table fit use idtool sample, "
         "idtool report, or LevelsFit.predict in Python (docs/how-to/levels-table.md)"
     )
-
-
-def _side(entry: list) -> Side:
-    return Side(float(entry[0]), float(entry[1]), str(entry[2]))
 
 
 def load_levels_fit(folder: str | Path) -> LevelsFit:
@@ -87,7 +84,11 @@ def load_levels_fit(folder: str | Path) -> LevelsFit:
             fit = _rebuild(doc, table)
             ranking = tuple(_choice(w) for w in doc.get("models_compared", ()))
             alternates = tuple(_rebuild(a, table) for a in doc.get("alternates", ()))
-            fit = dataclasses.replace(fit, ranking=ranking, alternates=alternates)
+            check = doc.get("coupling_check")
+            fit = dataclasses.replace(
+                fit, ranking=ranking, alternates=alternates,
+                coupling_check=None if check is None else CouplingCheck.from_dict(check),
+            )  # fmt: skip
     except (KeyError, TypeError, ValueError, IndexError) as err:
         raise IdtoolError(f"{path}: unreadable fit ({err!r}); run 'idtool fit' again") from None
     if (folder / POSTERIOR_NC).is_file():
@@ -134,7 +135,7 @@ def _rebuild(doc: dict, table) -> LevelsFit:
     se_z = np.sqrt(np.maximum(np.diag(cov_theta), 0.0))
     estimates, sides, ends = {}, {}, {}
     for j, p in enumerate(model.params):
-        lo, hi = (_side(e) for e in state["sides"][p.name])
+        lo, hi = (Side.from_json(e) for e in state["sides"][p.name])
         sides[p.name] = (lo, hi)
         ends[p.name] = np.asarray(state["ends"][p.name], float).reshape(2, theta.size)
         se = float(se_z[j]) if lo.method == hi.method == "wald" else math.inf

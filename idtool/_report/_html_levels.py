@@ -8,11 +8,13 @@ speeds, the chain's convergence, provenance and sign-off."""
 from __future__ import annotations
 
 import html
+import math
 from pathlib import Path
 
 import numpy as np
 
 from idtool._atomic import atomic_output_dir, write_text_atomic
+from idtool._lawfit._result import estimate_from_sides
 from idtool._levels._estimate import SD_NAMES
 from idtool._levels._result import FIGURE, FIT_JSON, POSTERIOR_NC, LevelsFit
 from idtool._levels._store import load_levels_fit
@@ -84,6 +86,27 @@ def _estimates(fit: LevelsFit) -> str:
         )
     head = ["parameter", "unit", "fit estimate", "fit 95% interval", "posterior median [95%]"]
     return table(head, rows)
+
+
+def _shape(fit: LevelsFit) -> str:
+    """The coupling law's shape against free slip amplitudes (idtool/_levels/_free.py):
+    the test and each friction-law parameter's law-free interval beside the stated one."""
+    c = fit.coupling_check
+    assert c is not None
+    verdict = "rejected at 5%: intervals widened" if c.rejected else "not rejected"
+    rows = []
+    for name, (lo, hi) in c.free.items():
+        p = fit.model.params[fit.model.names.index(name)]
+        free = estimate_from_sides(p, 0.0, math.inf, lo, hi).statement
+        rows.append([name, free, fit.estimates[name].statement])
+    return (
+        f"<p>The {html.escape(c.coupling)} law against a free slip amplitude at each of the "
+        f"table's {c.points} load-amplitude points ({c.resolved} measured at two or more "
+        "speeds, where the speeds pin Kt without a coupling law): -2 log likelihood ratio "
+        f"{c.statistic:.2f}, F on {c.dof} and {c.residual_dof} degrees of freedom, "
+        f"p = {c.p_value:.3g}. Verdict: <b>{verdict}</b>.</p>"
+        + table(["parameter", "law-free 95% interval", "stated 95% interval"], rows)
+    )
 
 
 def _data(fit: LevelsFit) -> str:
@@ -224,6 +247,8 @@ def write_levels_report(fit_folder: str | Path) -> Path:
         sec["Models compared"] = _models(fit)
     sec["What to measure next"] = _next_rows(fit)
     sec["Estimates"] = _estimates(fit)
+    if fit.coupling_check is not None:
+        sec["Coupling law's shape"] = _shape(fit)
     sec["Data"] = _data(fit)
     if fit.notes:
         sec["Notes"] = "<ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in fit.notes) + "</ul>"
