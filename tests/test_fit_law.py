@@ -255,3 +255,17 @@ def test_a_load_cell_offset_and_drift_are_fitted_not_read_as_friction():
     assert nuisance["offset_n"] == pytest.approx(0.2, abs=0.01)
     assert nuisance["drift_n"] == pytest.approx(0.1, abs=0.02)
     assert abs(fit.noise_sd_n - 0.01) < 0.001
+
+
+def test_a_fit_compiles_one_lm_program():
+    """Every Levenberg-Marquardt call runs the same number of rows (the multi-start's
+    best, the profile's refits in chunks, the AR(1) refits), with the same arguments:
+    one compiled program per series shape and law (two before, 2-5 s of a first
+    10,000-sample fit: the main solve passed one argument fewer)."""
+    from idtool._lawfit import _solve
+
+    series = idtool.simulate_series("lugre", kind="sliding", duration_s=1.234, seed=3)
+    before = _solve._lm_batch._cache_size()
+    fit = idtool.fit_law(series, "lugre")
+    assert _solve._lm_batch._cache_size() - before == 1
+    assert all(np.isfinite(e.ci95).all() for e in fit.estimates.values())
