@@ -108,6 +108,8 @@ def series_row(kind: str, departure: str | None, seed: int) -> dict:
         "inside": inside,
         "stated": stated,
         "warnings": len(fit.warnings),
+        "lag_kept": bool(fit.sensor_lag_s is not None),
+        "lag_s": fit.sensor_lag_s,
         "seconds": fit.seconds,
     }
 
@@ -137,8 +139,8 @@ def _series_summary(rows: list[dict]) -> None:
     for r in rows:
         groups[(r["series"], r["departure"])].append(r)
     names = list(rows[0]["inside"])
-    print("\n| series | departure | " + " | ".join(names) + " | s per fit |")
-    print("|---|---|" + "---|" * (len(names) + 1))
+    print("\n| series | departure | " + " | ".join(names) + " | lag fitted | s per fit |")
+    print("|---|---|" + "---|" * (len(names) + 2))
     for (k, dep), rs in groups.items():
         n = len(rs)
         cells = []
@@ -147,7 +149,8 @@ def _series_summary(rows: list[dict]) -> None:
             said = sum(r["stated"][name] for r in rs)
             cells.append(f"{hit}/{n}" + (f" ({said} stated)" if said else ""))
         secs = np.median([r["seconds"] for r in rs])
-        print(f"| {k} | {dep} | " + " | ".join(cells) + f" | {secs:.1f} |")
+        kept = sum(r["lag_kept"] for r in rs)
+        print(f"| {k} | {dep} | " + " | ".join(cells) + f" | {kept}/{n} | {secs:.1f} |")
 
 
 def main() -> None:

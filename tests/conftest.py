@@ -200,7 +200,7 @@ FILE_SECONDS: dict[str, float] = {
     "tests/test_plateau_drift.py": 133,
     "tests/test_transducer.py": 132,
     "tests/test_arviz.py": 120,
-    "tests/test_fit_law.py": 113,
+    "tests/test_fit_law.py": 150,
     "tests/test_relaxing_on.py": 107,
     "tests/test_report.py": 104,
     "tests/test_lm.py": 84,

@@ -12,7 +12,7 @@ from idtool._data._series import Series, read_series
 from idtool._lawfit._problem import make_problem
 from idtool._lawfit._profile import profile_intervals
 from idtool._lawfit._result import SeriesFit, estimate_from_sides
-from idtool._lawfit._solve import solve
+from idtool._lawfit._solve import fit_lag, solve
 
 __all__ = ["fit_law"]
 
@@ -29,7 +29,9 @@ def fit_law(
     The law's bristle state is integrated through the series
     (:mod:`idtool._model._series_force`: exact slip updates, model notes §4), the
     parameters found by Levenberg-Marquardt on the force residuals from a multi-start,
-    and each physical parameter's 95% interval checked against its profile likelihood
+    the load cell's first-order lag tested for by a likelihood ratio and fitted where the
+    series asks for it (:mod:`idtool._lawfit._lag`), and each physical parameter's 95%
+    interval checked against its profile likelihood
     (:mod:`idtool._lawfit._profile`). A parameter the series cannot inform is stated so
     (one-sided, or not identified) instead of being given a huge standard error.
 
@@ -55,6 +57,9 @@ def fit_law(
     start = time.perf_counter()
     problem = make_problem(series, law)
     opt, lm = solve(problem)
+    # the load cell's lag, kept where the likelihood ratio asks for it
+    problem, opt, lagged_lm = fit_lag(problem, opt)
+    lm = lagged_lm or lm
     n_phys = problem.n_physical
     sides = profile_intervals(lm, opt, n_phys)
     se_z = np.sqrt(np.diag(opt.cov_z))
@@ -65,7 +70,15 @@ def fit_law(
         estimates[p.name] = estimate_from_sides(p, float(opt.z[k]), se, *sides[k])
         by_name[p.name] = sides[k]
     force = np.asarray(problem.model_force(jnp.asarray(opt.z))[0])
-    fit = SeriesFit(problem, opt, estimates, by_name, force, time.perf_counter() - start)
+    fit = SeriesFit(
+        problem,
+        opt,
+        estimates,
+        by_name,
+        force,
+        time.perf_counter() - start,
+        lag_check=opt.lag_check,
+    )
     if posterior:
         from idtool._lawfit._posterior import sample_posterior
 

@@ -7,7 +7,9 @@ the bristle force at the first sample as a fraction of the level there,
 rest), and the load cell's zero: an offset ``offset_n`` [N] and a linear drift
 ``drift_n`` [N over the record] added to the model's force (``linear`` nuisances: a
 tared cell is off by a little, and warms over a long record; without them a drift of
-5 noise sds over a presliding record moved Kt out of its interval on 2 of 3 series).
+5 noise sds over a presliding record moved Kt out of its interval on 2 of 3 series),
+and, where the series asks for it, the load cell's lag ``sensor_lag_s``
+(:mod:`idtool._lawfit._lag`: the friction force through a first-order sensor).
 The residuals are ``(F_model - F_measured) / force_scale``, whitened by an AR(1)
 coefficient ``phi`` when the noise asks for it (Prais-Winsten: the first residual scaled
 by ``sqrt(1 - phi^2)``, then ``r_k - phi r_(k-1)``).
@@ -25,6 +27,7 @@ import numpy as np
 
 from idtool._data._series import Series
 from idtool._errors import IdtoolError
+from idtool._lawfit._lag import LAG
 from idtool._model._params import Param
 from idtool._model._series_force import series_force
 from idtool._model._series_law import SeriesLaw, scale_of, scaled, series_law
@@ -120,6 +123,7 @@ class Model:
             interval_velocity_m_s=data.interval_velocity_m_s if self.displacement_input else None,
             extra_viscous_n_s_m=self.law.extra_viscous_n_s_m(law_values),
             substeps=SUBSTEPS,
+            lag_s=values.get(LAG.name),
         )
         t = data.time_s
         zero = values[OFFSET.name] + values[DRIFT.name] * (t - t[0]) / (t[-1] - t[0])
@@ -183,8 +187,9 @@ def whiten(r, phi):
     return jnp.concatenate([first, r[1:] - phi * r[:-1]])
 
 
-def make_problem(series: Series, law: str) -> Problem:
-    """The problem of fitting ``law`` to ``series``."""
+def make_problem(series: Series, law: str, *, lag: bool = False) -> Problem:
+    """The problem of fitting ``law`` to ``series`` (with the load cell's lag, last,
+    where ``lag``)."""
     v = series.velocity()
     f_scale = float(np.percentile(np.abs(series.force_n), 99))
     v_scale = float(np.percentile(np.abs(v), 99))
@@ -193,9 +198,10 @@ def make_problem(series: Series, law: str) -> Problem:
     spec = series_law(law, with_load=series.normal_load_n is not None)
     starts = {p.name: p.start for p in spec.params}
     rigid = not np.isfinite(float(spec.law_at(starts, 1.0).stiffness_n_m()))
-    declared = (*spec.params, *(() if rigid else (FB0,)), OFFSET, DRIFT)
-    scales = np.array([scale_of(p.name, f_scale, v_scale) for p in declared])
+    declared = (*spec.params, *(() if rigid else (FB0,)), OFFSET, DRIFT, *((LAG,) if lag else ()))
     t = series.time_s
+    dt = float(np.median(np.diff(t)))
+    scales = np.array([dt if p is LAG else scale_of(p.name, f_scale, v_scale) for p in declared])
     load = np.ones_like(t) if series.normal_load_n is None else series.normal_load_n
     iv = (
         np.zeros(t.size - 1)

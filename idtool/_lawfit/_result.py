@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from idtool._fit._result import Estimate, interval_statement, one_sided, weakly_identified
+from idtool._lawfit._lag import LAG, LagCheck
 from idtool._lawfit._problem import Problem
 from idtool._lawfit._profile import Side
 from idtool._lawfit._solve import Optimum
@@ -44,6 +45,9 @@ class SeriesFit:
         sides: each physical parameter's interval ends and how they were found.
         force_model_n: the fitted friction force at every sample [N].
         seconds: wall time of the fit [s].
+        lag_check: the likelihood-ratio test of a load-cell lag
+            (:mod:`idtool._lawfit._lag`); where it rejects the lag-free model, the fit
+            carries the lag.
         posterior: the emcee summary when one was run (``posterior=True``), else None.
     """
 
@@ -53,6 +57,7 @@ class SeriesFit:
     sides: dict[str, tuple[Side, Side]]
     force_model_n: np.ndarray
     seconds: float
+    lag_check: LagCheck | None = None
     posterior: dict[str, Any] | None = None
 
     @property
@@ -68,6 +73,25 @@ class SeriesFit:
     def noise_sd_n(self) -> float:
         """Residual sd [N] (of the innovations when AR(1)-whitened)."""
         return math.sqrt(self.optimum.sigma2) * self.problem.force_scale_n
+
+    @property
+    def sensor_lag_s(self) -> float | None:
+        """The fitted load-cell lag [s], or None where the fit carries none."""
+        names = [p.name for p in self.problem.params]
+        if LAG.name not in names:
+            return None
+        k = names.index(LAG.name)
+        return float(self.problem.params[k].value(self.optimum.z[k]))
+
+    def _lag_line(self) -> str:
+        c = self.lag_check
+        if c is None:
+            return "not tested"
+        test = f"likelihood ratio {c.statistic:.3g}, p = {c.p_value:.2g}"
+        lag = self.sensor_lag_s
+        if lag is not None:
+            return f"{lag * 1e3:.4g} ms, fitted ({test})"
+        return f"not needed ({test}; the lag model's {c.lag_s * 1e3:.3g} ms)"
 
     @property
     def statements(self) -> dict[str, str]:
@@ -88,6 +112,13 @@ class SeriesFit:
                     f"{name}: the Wald interval disagreed with the profile likelihood "
                     "(rise of -2 log L below 1 at an end); the profile's end is reported"
                 )
+        lag = self.sensor_lag_s
+        if lag is not None:
+            out.append(
+                f"the load cell lags the force (first order, {lag * 1e3:.3g} ms; "
+                f"{self._lag_line().split('(', 1)[1][:-1]}): the lag is fitted with the "
+                "law; without it the delay reads as bristle compliance"
+            )
         if self.optimum.phi:
             out.append(
                 f"the residuals are autocorrelated (lag-1 {self.optimum.phi_white:+.2f} in "
@@ -140,6 +171,10 @@ class SeriesFit:
                 "ar1_phi": opt.phi,
                 "noise_model": "AR(1)" if opt.phi else "white",
             },
+            "sensor_lag": {
+                "lag_s": self.sensor_lag_s,
+                "check": None if self.lag_check is None else self.lag_check.to_json(),
+            },
             "lm_steps": opt.steps,
             "seconds": self.seconds,
             "warnings": self.warnings,
@@ -158,6 +193,7 @@ class SeriesFit:
             f"    residual sd        = {np.std(self.residuals_n):.4g} N",
             f"    lag-1 autocorr.    = {opt.phi_white:+.3f} (white fit); noise model "
             + (f"AR(1), phi = {opt.phi:+.3f}" if opt.phi else "white"),
+            f"    sensor lag         = {self._lag_line()}",
             f"    LM steps           = {opt.steps}",
             f"    time               = {self.seconds:.2f} s",
             "[[Parameters]] (95% intervals; se where the data bound both sides)",

@@ -21,13 +21,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from idtool._lawfit._problem import Data, Model, Problem, batch_loss, start_grid
+from idtool._fit._compiled import QUICK_COMPILE
+from idtool._lawfit._lag import LAG, LagCheck, lag_test
+from idtool._lawfit._problem import Data, Model, Problem, batch_loss, make_problem, start_grid
 
 __all__ = [
     "PHI_TRIGGER",
     "BatchedLM",
     "Optimum",
     "ar1",
+    "fit_lag",
     "levenberg_marquardt",
     "refit_batch",
     "solve",
@@ -61,6 +64,8 @@ class Optimum:
         phi: the AR(1) coefficient used (0: white).
         phi_white: the lag-1 autocorrelation of the white fit's residuals.
         steps: LM steps of the final solve.
+        lag_check: the likelihood-ratio test of the load cell's lag
+            (:mod:`idtool._lawfit._lag`), once :func:`fit_lag` has run.
     """
 
     z: np.ndarray
@@ -70,24 +75,22 @@ class Optimum:
     phi: float
     phi_white: float
     steps: int
+    lag_check: LagCheck | None = None
 
 
-@functools.partial(jax.jit, static_argnums=0)
-def _lm_batch(model: Model, data: Data, z0, phi, index, value, decrement=MAIN_DECREMENT):
-    """LM from each row of ``z0`` with ``z[index[k]]`` held at ``value[k]`` (``-1``:
-    nothing held), as one vmapped program: ``(z, |r|^2, steps)`` per row."""
-    p = len(model.params)
+@functools.partial(jax.jit, static_argnums=0, compiler_options=QUICK_COMPILE)
+def _lm_batch(model: Model, data: Data, z0, phi, held, value, decrement, max_steps):
+    """LM from each row of ``z0`` with ``z[k, j]`` held at ``value[k, j]`` where
+    ``held[k, j]``, as one vmapped program: ``(z, |r|^2, steps)`` per row."""
 
-    def one(z0, index, value):
-        held = jnp.arange(p) == index
-
+    def one(z0, held, value):
         def fn(z):
             r = model.residuals(data, jnp.where(held, value, z), phi)
             return r, r
 
-        return levenberg_marquardt(fn, jnp.where(held, value, z0), decrement)
+        return levenberg_marquardt(fn, jnp.where(held, value, z0), decrement, max_steps)
 
-    return jax.vmap(one)(z0, index, value)
+    return jax.vmap(one)(z0, held, value)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -103,7 +106,9 @@ class BatchedLM:
     data: Data
     width: int
 
-    def __call__(self, z0, phi, index, value, decrement):
+    def __call__(self, z0, phi, held, value, decrement, max_steps=_MAX_STEPS):
+        """LM from the rows of ``z0`` (k, p) with the entries ``held`` (k, p) held at
+        ``value`` (k, p)."""
         k = z0.shape[0]
         if k > self.width:
             raise ValueError(f"z0: {k} rows, more than the batch width {self.width}")
@@ -113,8 +118,17 @@ class BatchedLM:
             x = np.asarray(x)
             return jnp.asarray(np.concatenate([x, np.repeat(x[:1], pad, axis=0)]))
 
+        # (every argument typed alike on every call: a weakly typed number is a new
+        # program)
         z, loss, steps = _lm_batch(
-            self.model, self.data, padded(z0), phi, padded(index), padded(value), decrement
+            self.model,
+            self.data,
+            padded(z0),
+            np.float64(phi),
+            padded(held),
+            padded(value),
+            np.float64(decrement),
+            np.int64(max_steps),
         )
         return z[:k], loss[:k], steps[:k]
 
@@ -124,7 +138,7 @@ def _lm(problem: Problem) -> BatchedLM:
     return BatchedLM(problem.model, problem.data, max(_BEST_STARTS, 2 * problem.n_physical))
 
 
-def levenberg_marquardt(fn, z0, decrement=1e-4, max_steps: int = _MAX_STEPS):
+def levenberg_marquardt(fn, z0, decrement=1e-4, max_steps=_MAX_STEPS):
     """Minimise ``|r(z)|^2`` (``fn(z) -> (r, r)``) by Levenberg-Marquardt with Moré's
     scaling and Nielsen's damping update (Madsen, Nielsen & Tingleff 2004, Algorithm
     3.16, as :mod:`idtool._fit._lm`), the Jacobian by forward mode (one pass of the
@@ -192,35 +206,33 @@ def ar1(r: np.ndarray) -> float:
     return float(np.dot(r[1:], r[:-1]) / np.dot(r, r))
 
 
-def solve(problem: Problem) -> tuple[Optimum, BatchedLM]:
+def solve(problem: Problem, starts: np.ndarray | None = None) -> tuple[Optimum, BatchedLM]:
     """The least-squares optimum of ``problem`` from the best starts of
-    :func:`idtool._lawfit._problem.start_grid`, whitened by AR(1) when the white fit's
-    residuals are correlated (:data:`PHI_TRIGGER`). Returns it and the batched LM (for
-    the profile refits)."""
-    grid = start_grid(problem)
-    losses = np.asarray(batch_loss(problem.model, problem.data, jnp.asarray(grid)))
+    :func:`idtool._lawfit._problem.start_grid` (or from each row of ``starts``),
+    whitened by AR(1) when the white fit's residuals are correlated
+    (:data:`PHI_TRIGGER`). Returns it and the batched LM (for the profile refits)."""
     lm = _lm(problem)
-    # as many starts as the batch holds (two per physical parameter, at least four): on
-    # a presliding series the main solve from 12 starts left an optimum whose profile
-    # refits converged sooner, 44 s a fit against 63 s from 4 starts padded to 12
-    order = np.argsort(np.where(np.isfinite(losses), losses, np.inf))[: lm.width]
-    # (index and value typed as the refits type theirs: a weakly typed -1, or one
-    # argument fewer, is a new program)
-    none, zeros = np.full(order.size, -1), np.zeros(order.size)
-    z, loss, steps = lm(grid[order], 0.0, none, zeros, MAIN_DECREMENT)
-    best = int(np.nanargmin(np.asarray(loss)))
-    z_white = np.asarray(z[best])
+    if starts is None:
+        grid = start_grid(problem)
+        losses = np.asarray(batch_loss(problem.model, problem.data, jnp.asarray(grid)))
+        # as many starts as the batch holds (two per physical parameter, at least
+        # four): on a presliding series the main solve from 12 starts left an optimum
+        # whose profile refits converged sooner, 44 s a fit against 63 s from 4 starts
+        # padded to 12
+        rows = grid[np.argsort(np.where(np.isfinite(losses), losses, np.inf))[: lm.width]]
+    else:
+        rows = np.asarray(starts, float)
+    z_white, step_count = _best(lm, rows)
     r = np.asarray(problem.residuals(jnp.asarray(z_white)))
     n = r.size
     phi_white = ar1(r)
-    phi, step_count = 0.0, int(steps[best])
+    phi = 0.0
     z_opt = z_white
     if abs(phi_white) > max(PHI_TRIGGER, 3.0 / math.sqrt(n)):
         # Cochrane-Orcutt: refit on the innovations, re-estimate phi, refit once more
         phi = phi_white
         for _ in range(2):
-            zz, _, st = lm(z_opt[None], phi, none[:1], zeros[:1], MAIN_DECREMENT)
-            z_opt, step_count = np.asarray(zz[0]), int(st[0])
+            z_opt, step_count = _best(lm, z_opt[None], phi)
             phi = ar1(np.asarray(problem.residuals(jnp.asarray(z_opt))))
         phi = float(np.clip(phi, -0.99, 0.99))
     zj = jnp.asarray(z_opt)
@@ -228,7 +240,50 @@ def solve(problem: Problem) -> tuple[Optimum, BatchedLM]:
     jac = np.asarray(_jacobian(problem.model, problem.data, zj, phi))
     rss = float(rw @ rw)
     sigma2 = rss / (n - z_opt.size)
-    return Optimum(z_opt, sigma2 * _pinv(jac.T @ jac), rss, sigma2, phi, phi_white, step_count), lm
+    cov = sigma2 * _pinv(jac.T @ jac)
+    return Optimum(z_opt, cov, rss, sigma2, phi, phi_white, step_count), lm
+
+
+def _best(lm: BatchedLM, rows, phi=0.0, decrement=MAIN_DECREMENT, max_steps=_MAX_STEPS):
+    """LM from each row (nothing held); the best row's z and its steps."""
+    rows = np.asarray(rows, float)
+    held = np.zeros(rows.shape, bool)
+    z, loss, steps = lm(rows, phi, held, rows, decrement, max_steps)
+    best = int(np.nanargmin(np.asarray(loss)))
+    return np.asarray(z[best]), int(steps[best])
+
+
+# The lag's starts, in sample intervals: a lag and the bristles' compliance both delay
+# the force after a reversal, and LM from the lag-free optimum with one small lag
+# stayed in the lag-free basin (Kt 1.8x its truth) on one series of eight
+LAG_STARTS = (0.1, 0.2, 0.35, 0.5, 0.7, 1.0, 1.4, 2.0, 2.8, 4.0)
+# LM steps of the test's lag fits: from a start in the lag's basin LM reached the
+# optimum in 8-20 steps; from the others it crawls towards no lag, which the test then
+# compares with the lag-free optimum anyway
+LAG_STEPS = 12
+
+
+def fit_lag(problem: Problem, optimum: Optimum) -> tuple[Problem, Optimum, BatchedLM | None]:
+    """The load cell's lag (:mod:`idtool._lawfit._lag`) for the lag-free ``optimum`` of
+    ``problem``: the lag model fitted from that optimum with the lag at each of
+    :data:`LAG_STARTS` (at most :data:`LAG_STEPS` steps, a profile refit's tolerance),
+    tested by the likelihood ratio, and where the test keeps it, the lag model's own
+    optimum (polished, whitened) and its LM; else ``problem``, ``optimum`` with the test
+    attached and no LM."""
+    lagged_problem = make_problem(problem.series, problem.law.name, lag=True)
+    lm = _lm(lagged_problem)
+    k = len(problem.params)  # the lag is declared last
+    pick = np.linspace(0, len(LAG_STARTS) - 1, min(lm.width, len(LAG_STARTS))).round()
+    rows = np.array([np.append(optimum.z, LAG.internal(LAG_STARTS[int(i)])) for i in pick])
+    z_lag, _ = _best(lm, rows, optimum.phi, REFIT_DECREMENT, LAG_STEPS)
+    n = problem.series.n_samples
+    rss = np.asarray(lagged_problem.residuals(jnp.asarray(z_lag), optimum.phi))
+    lag_s = float(lagged_problem.params[k].value(z_lag[k]))
+    check = lag_test(lag_s, (optimum.rss, n, optimum.phi), (float(rss @ rss), n, optimum.phi))
+    if not check.fitted:
+        return problem, dataclasses.replace(optimum, lag_check=check), None
+    lagged_opt, _ = solve(lagged_problem, z_lag[None])
+    return lagged_problem, dataclasses.replace(lagged_opt, lag_check=check), lm
 
 
 @functools.partial(jax.jit, static_argnums=0)
@@ -254,6 +309,8 @@ def refit_batch(lm, optimum: Optimum, index: np.ndarray, value: np.ndarray, star
     k = len(index)
     z0 = np.tile(optimum.z, (k, 1)) if starts is None else np.array(starts, float)
     z0[np.arange(k), index] = value
-    z, loss, _ = lm(z0, optimum.phi, np.asarray(index), np.asarray(value, float), REFIT_DECREMENT)
+    held = np.zeros(z0.shape, bool)
+    held[np.arange(k), index] = True
+    z, loss, _ = lm(z0, optimum.phi, held, z0, REFIT_DECREMENT)
     z, loss = np.asarray(z), np.asarray(loss)
     return z, (loss - optimum.rss) / optimum.sigma2
