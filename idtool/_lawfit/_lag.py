@@ -10,10 +10,11 @@ series (``benchmarks/study_benches.py``). The lag-free optimum is then a basin o
 own: a score test there (the residuals regressed on the Jacobian and ``-dF/dt``) gave
 chi-squared 0.3-5 on series whose likelihood ratio for the lag was 580-710. So every
 fit is refitted with the lag as a parameter, :data:`LAG` (declared in sample intervals),
-from starts spread over a tenth of a sample interval to four (:func:`lag_starts`), and
-the lag is kept where the likelihood ratio rejects the lag-free model at :data:`LEVEL`
-(the lag's null value is its range's lower end, so the ratio's null distribution is
-half chi-squared with 1 degree of freedom, half zero).
+from starts spread over a tenth of a sample interval to four
+(:func:`idtool._lawfit._solve.fit_lag`), and the lag is kept where the likelihood
+ratio rejects the lag-free model at :data:`LEVEL` (the lag's null value is its range's
+lower end, so the ratio's null distribution is half chi-squared with 1 degree of
+freedom, half zero).
 """
 
 from __future__ import annotations
