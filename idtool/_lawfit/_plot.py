@@ -26,7 +26,9 @@ def plot_fit(fit, path: str | Path) -> Path:
         1, 3, figsize=(11.0, 3.6), gridspec_kw={"width_ratios": [2.0, 1.2, 1.2]}
     )
     a1.plot(t[keep], f[keep], ".", ms=2.0, color="0.55", label="measured")
-    a1.plot(t[keep], m[keep], "-", lw=1.2, color="C3", label=f"fitted ({fit.law})")
+    lag = fit.sensor_lag_s
+    what = fit.law if lag is None else f"{fit.law}, sensor lag {lag * 1e3:.2g} ms"
+    a1.plot(t[keep], m[keep], "-", lw=1.2, color="C3", label=f"fitted ({what})")
     a1.set(xlabel="time [s]", ylabel="friction force [N]", title="force against time")
     a1.legend(loc="upper right", fontsize=8)
     a2.plot(x_um[keep], f[keep], ".", ms=2.0, color="0.55")
