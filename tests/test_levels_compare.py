@@ -62,7 +62,9 @@ def test_the_material_with_the_stronger_coupling_reduces_more(a_vs_b):
     assert (truths[0] < truths[1]).all()
     half = (c.band[:, :, 1] - c.band[:, :, 0]) / 2
     clear = truths[1] - truths[0] > 2 * (half[0] + half[1])
-    assert clear.sum() >= 6, clear.sum()  # the test has teeth: conditions far apart
+    # the test has teeth: conditions far apart (5 of 18 since the bands integrate the
+    # discrepancy sd over its likelihood, 6 at REML's estimate)
+    assert clear.sum() >= 5, clear.sum()
     assert (c.prob_ref_lower[0, clear] > 0.95).all()
     assert (c.prob_ref_lower[0] > 0.05).all()  # B never named the better one
     assert (c.diff_pp[0, clear] > 0).all()

@@ -6,6 +6,7 @@ the law is left alone, and the check is saved with the fit."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import jsonschema
@@ -64,12 +65,17 @@ def test_a_horn_no_law_describes_is_rejected_and_kt_widened_to_hold_the_truth(di
     assert check.widened == ("Kt",)
     lo, hi = fit.estimates["Kt"].ci95
     assert lo <= KT <= hi, fit.estimates["Kt"].statement
-    # the law's own interval (its profile, before widening) missed the truth
+    # the law alone reads Kt through its wrong shape, a decade or more off; across the
+    # sliding its interval (its profile, before widening) misses the truth (along it
+    # now reaches it, < 2.03e6 for 2e6, since the 9.5% discrepancy's own uncertainty
+    # is integrated: < 1.9e6 at REML's estimate)
     from idtool._levels._api import _fit_one
 
     law = _fit_one(table, "dahl", fit.model.coupling, direction, 0, 0.0)
+    assert abs(math.log10(law.estimates["Kt"].estimate / KT)) > 1.0
     lo, hi = law.estimates["Kt"].ci95
-    assert not lo <= KT <= hi, law.estimates["Kt"].statement
+    if direction == "transverse":
+        assert not lo <= KT <= hi, law.estimates["Kt"].statement
     assert any("rejects the" in w and "law's shape" in w for w in fit.warnings)
     # the unpinned-parameters warning states Kt's interval as the estimates do
     for w in fit.warnings:

@@ -235,7 +235,8 @@ def _diagnose(fit: LevelsFit) -> tuple[tuple[str, ...], tuple[str, ...]]:
                 "fit --coupling constant"
             )
         warnings.append(text)
-    disc = o.sds["discrepancy_fr"]
+    # REML's estimate, not the bands' sd: the misfit the table shows, not its doubt
+    disc = o.sds["discrepancy_fr"] if o.discrepancy is None else o.discrepancy.reml
     if disc > MISSPECIFIED_SD:
         warnings.append(
             f"{MISFIT} the conditions by {100 * disc:.0f}% in friction ratio "

@@ -17,7 +17,9 @@ fit of ``k`` parameters to ``k`` numbers would otherwise drive an sd to zero).
 Stages: multi-start Gauss-Newton (:func:`scipy.optimize.least_squares`, on the
 whitened residuals ``C^-1/2 (y - g(theta))``) at starting sds, then alternately the sds
 by restricted maximum likelihood (REML, theta profiled on the linearised model) and
-theta by generalised least squares, until the sds settle. Intervals: each parameter's
+theta by generalised least squares, until the sds settle; by REML, the discrepancy sd
+then integrated over its likelihood (:mod:`idtool._levels._discrepancy`: a table rarely
+pins it) and theta solved again at the sd that gives. Intervals: each parameter's
 Wald interval checked against its profile (the others refitted, the sds held), as
 :mod:`idtool._lawfit._profile` does: a side where ``-2 log L`` rises by less than 3 is
 walked out to a rise of 3.84, or to the parameter's range (then open).
@@ -43,6 +45,7 @@ from idtool._lawfit._profile import (
     Side,
     line_crossing,
 )
+from idtool._levels._discrepancy import DiscrepancyPosterior, discrepancy_posterior
 from idtool._model._params import Param
 
 __all__ = ["SD_FLOOR", "SD_NAMES", "Optimum", "TableModel", "estimate", "profile_sides"]
@@ -88,8 +91,12 @@ class Optimum:
         chi2: ``r' C^-1 r`` at the optimum; ``chi2_noise``: against the measurement
             variance alone (NaN without standard errors).
         null: unit directions (k, m) of theta the data do not inform (m may be 0).
-        loglik: log-likelihood at the optimum.
+        loglik: log-likelihood at the optimum (the sds at their REML estimates).
         restricted: the sds by REML (else ML: no residual degrees of freedom).
+        discrepancy: by REML, the discrepancy sd's posterior
+            (:mod:`idtool._levels._discrepancy`); then ``sds["discrepancy_fr"]``, ``cov``,
+            ``theta``, ``cov_theta`` and ``chi2`` are at its band sd, not at REML's
+            estimate.
     """
 
     theta: np.ndarray
@@ -102,6 +109,7 @@ class Optimum:
     null: np.ndarray
     loglik: float
     restricted: bool = True
+    discrepancy: DiscrepancyPosterior | None = None
 
 
 def _data(model: TableModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -191,7 +199,11 @@ def _starts(model: TableModel, rng: np.random.Generator) -> list[np.ndarray]:
 
 
 def _reml(log_sds, active, r, g, m, kmat, restricted=True):
-    sds = np.where(active, np.exp(log_sds), 0.0)
+    return _reml_at(np.where(active, np.exp(log_sds), 0.0), r, g, m, kmat, restricted)
+
+
+def _reml_at(sds, r, g, m, kmat, restricted=True):
+    """Negative (restricted) log-likelihood at the sds (3,) (a constant left out)."""
     c = _cov(m, kmat, sds)
     try:
         chol = np.linalg.cholesky(c)
@@ -291,15 +303,32 @@ def estimate(
     sd_values = np.where(active, np.exp(log_sds), 0.0)
     c = _cov(m, kmat, sd_values)
     r = y - np.asarray(model.log_levels(theta))
-    g = np.asarray(model.jacobian(theta))
     chol = np.linalg.cholesky(c)
     rw = scipy.linalg.solve_triangular(chol, r, lower=True)
+    # the likelihood's maximum, at the estimated sds: what BIC and the shape check read
+    loglik = -0.5 * (
+        float(rw @ rw) + 2 * float(np.sum(np.log(np.diag(chol)))) + y.size * math.log(2 * math.pi)
+    )
+    discrepancy = None
+    if restricted:
+        # the discrepancy sd integrated over its REML likelihood (_discrepancy.py); theta
+        # by GLS again at the sd the intervals and bands use
+        g = np.asarray(model.jacobian(theta))
+
+        def nll(tau: float) -> float:
+            return _reml_at(np.array([sd_values[0], sd_values[1], tau]), r, g, m, kmat)
+
+        discrepancy = discrepancy_posterior(nll, float(sd_values[2]))
+        sd_values[2] = discrepancy.band_sd
+        c = _cov(m, kmat, sd_values)
+        theta = min(_solve(model, y, c, theta), _solve(model, y, c, best[0]), key=lambda x: x[1])[0]
+        r = y - np.asarray(model.log_levels(theta))
+        chol = np.linalg.cholesky(c)
+        rw = scipy.linalg.solve_triangular(chol, r, lower=True)
+    g = np.asarray(model.jacobian(theta))
     gw = scipy.linalg.solve_triangular(chol, g, lower=True)
     cov_theta, null = _null(gw.T @ gw)
     chi2 = float(rw @ rw)
-    loglik = -0.5 * (
-        chi2 + 2 * float(np.sum(np.log(np.diag(chol)))) + y.size * math.log(2 * math.pi)
-    )
     return Optimum(
         theta=theta,
         cov_theta=cov_theta,
@@ -311,6 +340,7 @@ def estimate(
         null=null,
         loglik=loglik,
         restricted=restricted,
+        discrepancy=discrepancy,
     )
 
 

@@ -330,8 +330,9 @@ def plan_rows(
             if goal == "parameters" and signed
             else []
         ),
-        "linearised at the fit's estimate; the sds at their estimates (not averaged over "
-        "their uncertainty, as the trace planner does)",
+        "linearised at the fit's estimate; the sds at the fit's (the discrepancy's the "
+        "one its bands use, integrated over its likelihood; the scatter's not averaged "
+        "over its uncertainty, as the trace planner does)",
         "a new row's OFF level is left out (mu is pinned by the table already); its FR "
         "variance the table's median (scatter and standard errors), the discrepancy's "
         "where the table has no repeats",

@@ -462,6 +462,13 @@ class LevelsFit:
         ]
         for name in SD_NAMES:
             tag = f"{100 * o.sds[name]:.2f}%" if o.sds[name] > 0 else "not estimated"
+            d = o.discrepancy
+            if name == "discrepancy_fr" and d is not None:
+                tag += (
+                    f"  (REML {100 * d.reml:.2f}%, 95% {100 * d.ci95[0]:.2f}-"
+                    f"{100 * d.ci95[1]:.2f}%: its likelihood integrated, the bands' and "
+                    "intervals' sd)"
+                )
             lines.append(f"  {name:15s} {tag}")
         lines += ["", "[[Rows]] measured and fitted friction ratio"]
         fit_fr = self.fitted_fr
@@ -512,7 +519,11 @@ class LevelsFit:
             },
             "model": {"law": m.law, "coupling": m.coupling, "direction": m.direction},
             "estimates": estimates,
-            "sds": {**o.sds, "method": "REML" if o.restricted else "ML"},
+            "sds": {
+                **o.sds,
+                "method": "REML" if o.restricted else "ML",
+                **({} if o.discrepancy is None else {"discrepancy": o.discrepancy.to_json()}),
+            },
             "chi2": o.chi2,
             "log_likelihood": o.loglik,
             "theta_internal": [float(x) for x in o.theta],

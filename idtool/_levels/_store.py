@@ -17,6 +17,7 @@ from idtool._fit._run import ChoiceWeight
 from idtool._lawfit._profile import Side
 from idtool._lawfit._result import estimate_from_sides
 from idtool._levels._api import fit_levels
+from idtool._levels._discrepancy import summary
 from idtool._levels._estimate import SD_NAMES, Optimum, _cov, _data
 from idtool._levels._free import CouplingCheck
 from idtool._levels._model import levels_model
@@ -131,6 +132,7 @@ def _rebuild(doc: dict, table) -> LevelsFit:
         null=null,
         loglik=float(doc["log_likelihood"]),
         restricted=bool(state["restricted"]),
+        discrepancy=None if "discrepancy" not in doc["sds"] else summary(doc["sds"]["discrepancy"]),
     )
     se_z = np.sqrt(np.maximum(np.diag(cov_theta), 0.0))
     estimates, sides, ends = {}, {}, {}

@@ -81,9 +81,12 @@ def _estimates(fit: LevelsFit) -> str:
         post = f"{g(s['median'])} [{g(s['ci95'][0])}, {g(s['ci95'][1])}]" if s else "-"
         value = fit.optimum.sds[name]
         est = "not estimated" if value == 0 else g(value)
-        rows.append(
-            [name, "1 (relative sd)", est, "REML" if fit.optimum.restricted else "ML", post]
-        )
+        how = "REML" if fit.optimum.restricted else "ML"
+        d = fit.optimum.discrepancy
+        if name == "discrepancy_fr" and d is not None:
+            # the bands' sd: REML's estimate integrated over its likelihood
+            how = f"[{g(d.ci95[0])}, {g(d.ci95[1])}] (REML estimate {g(d.reml)})"
+        rows.append([name, "1 (relative sd)", est, how, post])
     head = ["parameter", "unit", "fit estimate", "fit 95% interval", "posterior median [95%]"]
     return table(head, rows)
 
