@@ -103,13 +103,22 @@ def profile_intervals(lm, opt: Optimum, n_physical: int) -> list[tuple[Side, Sid
     ends = np.clip(wald, -Z_AT_BOUND, Z_AT_BOUND)
     # an end on the wrong side of the optimum (an optimum beyond the edge): no interval
     ends = np.where(sign * (ends - centre) > 0, ends, centre + sign * 1e-6)
-    _, rise = refit_batch(lm, opt, idx, ends)
+    # every refit starts from the optimum with each physical parameter brought back to
+    # the range's edge (Z_AT_BOUND; its value moves by < 0.1% of its range): one deep in
+    # its sigmoid's tail has no gradient, and refits held it there. A presliding series
+    # through a lagging cell put sigma1 at z = -13.7, and sigma2's refits, unable to hand
+    # the damping back to sigma1, stated [167, 390] N s/m against 20 (from the edge the
+    # rise at 20 is 3.06: sigma2 is not bounded below), as the table fit's refits start
+    starts = opt.z.copy()
+    starts[:n_physical] = np.clip(starts[:n_physical], -Z_AT_BOUND, Z_AT_BOUND)
+    starts = np.tile(starts, (idx.size, 1))
+    _, rise = refit_batch(lm, opt, idx, ends, starts)
     method = np.where(rise < TOO_FLAT, "profile", "wald").astype(object)
     method[beyond] = "profile"
     result = ends.copy()
     walk = method == "profile"
     if walk.any():
-        result = _walk(lm, opt, idx, sign, centre, ends, rise, walk, method)
+        result = _walk(lm, opt, idx, sign, centre, ends, rise, walk, method, starts)
     out = []
     for i in range(n_physical):
         lo, hi = (
@@ -126,8 +135,9 @@ def profile_intervals(lm, opt: Optimum, n_physical: int) -> list[tuple[Side, Sid
     return out
 
 
-def _walk(lm, opt, idx, sign, centre, ends, rise, walk, method):
-    """Move the sides in ``walk`` out to a rise of 3.84, or mark them open."""
+def _walk(lm, opt, idx, sign, centre, ends, rise, walk, method, starts):
+    """Move the sides in ``walk`` out to a rise of 3.84, or mark them open (each refit
+    from its row of ``starts``)."""
     inner = centre.copy()  # last point known below 3.84
     r_inner = np.zeros_like(rise)
     outer = np.where(rise >= CHI2_95, ends, np.nan)  # first point known above
@@ -142,7 +152,7 @@ def _walk(lm, opt, idx, sign, centre, ends, rise, walk, method):
             break
         step = np.where(active, 2.0 * step, step)
         trial = np.clip(centre + sign * step, -Z_AT_BOUND, Z_AT_BOUND)
-        _, r = refit_batch(lm, opt, idx, np.where(active, trial, ends))
+        _, r = refit_batch(lm, opt, idx, np.where(active, trial, ends), starts)
         above = active & (r >= CHI2_95)
         outer, r_outer = np.where(above, trial, outer), np.where(above, r, r_outer)
         stay = active & ~above
@@ -155,7 +165,7 @@ def _walk(lm, opt, idx, sign, centre, ends, rise, walk, method):
         if not bisect.any():
             break
         mid = 0.5 * (inner + np.where(bisect, outer, inner))
-        _, r = refit_batch(lm, opt, idx, np.where(bisect, mid, ends))
+        _, r = refit_batch(lm, opt, idx, np.where(bisect, mid, ends), starts)
         up = bisect & (r >= CHI2_95)
         outer, r_outer = np.where(up, mid, outer), np.where(up, r, r_outer)
         down = bisect & ~up
