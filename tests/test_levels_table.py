@@ -253,6 +253,25 @@ def test_cli_import_levels_then_fit(tmp_path, capsys):
     assert "cannot pin" in printed and "fr_vs_speed.png" in printed
     assert main(["fit", str(ds), "--out", str(tmp_path / "o2"), "--noise", "gaussian"]) == 2
     assert "apply to traces only" in capsys.readouterr().err
+    # idtool predict reads the table fit: its bands are LevelsFit.predict's, at the
+    # table's speeds by default, a load beyond the table's flagged as extrapolated
+    argv = ["predict", str(out), "--load", "10,20", "--amplitude", "1.0", "--json"]
+    assert main(argv) == 0
+    doc = json.loads(capsys.readouterr().out)
+    rows = doc["predictions"]
+    assert [r["sliding_speed_m_s"] for r in rows] == [0.0203, 0.087, 0.0203, 0.087]
+    fit = idtool.load_levels_fit(out)
+    p = fit.predict([10.0, 10.0], [0.0203, 0.087], amplitude_m=5e-6)
+    for i in range(2):
+        assert rows[i]["amplitude_m"] == pytest.approx(5e-6, rel=1e-12)
+        assert rows[i]["fr"] == pytest.approx(float(p.fr[i]), rel=1e-12)
+        assert rows[i]["fr_mean_ci95"] == pytest.approx([float(b[i]) for b in p.mean_band])
+        assert rows[i]["reduction_percent"] == pytest.approx(100 * (1 - float(p.fr[i])))
+    assert any("a load outside the table's 10 N: extrapolated" in w for w in doc["warnings"])
+    assert main(argv[:-1]) == 0
+    assert "mean FR [95%]" in capsys.readouterr().out
+    assert main([*argv, "--target-reduction", "50"]) == 2
+    assert "--target-reduction: not on a friction table's fit" in capsys.readouterr().err
 
 
 def test_cli_bad_table_exits_2_with_located_errors_and_no_traceback(tmp_path):

@@ -6,6 +6,8 @@ import argparse
 import json
 import math
 
+import numpy as np
+
 import idtool
 from idtool._cli._args import number_list
 from idtool._errors import IdtoolError
@@ -34,6 +36,10 @@ def _run(args: argparse.Namespace) -> int:
         )
     if args.draws < 10:
         raise IdtoolError(f"--draws {args.draws}: give at least 10")
+    from idtool._levels._store import is_levels_fit  # (lazy: --help loads no JAX)
+
+    if is_levels_fit(args.fit):
+        return _run_table(args)
     fit = idtool.load_fit(args.fit)
     draws = fit.draws(args.draws, args.seed)
     n_draws = sum(c.n for c in draws.components)  # every coupling law's, when averaged
@@ -75,6 +81,63 @@ def _run(args: argparse.Namespace) -> int:
         notes += [n for n in inverse.warnings if n not in notes]
     doc["warnings"] = notes
     lines += [f"warning: {n}" for n in notes]
+    print(json.dumps(doc, indent=1) if args.json else "\n".join(lines))
+    return 0
+
+
+def _run_table(args: argparse.Namespace) -> int:
+    """``predict`` on a friction table's fit (``idtool.LevelsFit.predict``): FR at the
+    grid of loads x amplitude fractions (of the table's reference amplitude) x sliding
+    speeds (default: the table's), with the bands at a new condition and of the next
+    measurement."""
+    if args.target_reduction is not None:
+        raise IdtoolError(
+            f"--target-reduction: not on a friction table's fit ({args.fit}) yet; predict "
+            "at several --amplitude fractions and read off the one that reaches it"
+        )
+    fit = idtool.load_levels_fit(args.fit)
+    t = fit.table
+    speeds = args.speed or sorted({float(v) for v in t.sliding_speed_m_s})
+    grid = np.array([(n, a, v) for n in args.load for a in args.amplitude for v in speeds])
+    p = fit.predict(grid[:, 0], grid[:, 2], amplitude_fraction=grid[:, 1])
+    rows = p.to_rows()
+    notes: list[str] = []
+    tested = {
+        "load": (t.normal_load_n, grid[:, 0], "N", 1.0),
+        "amplitude": (t.amplitude_m, grid[:, 1] * t.reference_amplitude_m, "um", 1e6),
+        "speed": (t.sliding_speed_m_s, grid[:, 2], "mm/s", 1e3),
+    }
+    for name, (have, asked, unit, scale) in tested.items():
+        lo, hi = float(np.min(have)), float(np.max(have))
+        if np.any((asked < lo * (1 - 1e-9)) | (asked > hi * (1 + 1e-9))):
+            span = f"{lo * scale:g}" if hi == lo else f"{lo * scale:g}-{hi * scale:g}"
+            notes.append(f"a {name} outside the table's {span} {unit}: extrapolated by the model")
+    if not np.all(p.pinned):
+        notes.append("the table does not bound FR at the points marked 'not bounded'")
+    source = "posterior draws" if fit.posterior is not None else "the fit's covariance"
+    lines = [
+        f"friction table fit {t.name}: bands from {source}; amplitude as a fraction of "
+        f"{t.reference_amplitude_m * 1e6:g} um",
+        "mean FR: at a new condition (the parameters and the model discrepancy); next: "
+        "where a single new measurement there will land (plus the scatter)",
+        f"{'load [N]':>9s} {'amplitude':>9s} {'speed':>8s}   {'mean FR [95%]':27s}"
+        f"{'next FR [95%]':27s}reduction % [95%]",
+    ]
+    for (n, a, v), row in zip(grid, rows, strict=True):
+        row["amplitude_fraction"] = float(a)
+        fr, (lo, hi), (nlo, nhi) = row["fr"], row["fr_mean_ci95"], row["fr_next_ci95"]
+        row["reduction_percent"] = 100.0 * (1.0 - fr)
+        row["reduction_ci95"] = [100.0 * (1.0 - hi), 100.0 * (1.0 - lo)]
+        if not row["pinned"]:
+            cells = "not bounded by the table"
+        else:
+            cells = (
+                f"{f'{fr:.4f} [{lo:.4f}, {hi:.4f}]':27s}{f'{fr:.4f} [{nlo:.4f}, {nhi:.4f}]':27s}"
+                f"{100 * (1 - fr):.1f} [{100 * (1 - hi):.1f}, {100 * (1 - lo):.1f}]"
+            )
+        lines.append(f"{n:9g} {a:9g} {v:8g}   {cells}")
+    lines += [f"warning: {n}" for n in notes]
+    doc = {"kind": "levels", "source": source, "predictions": rows, "warnings": notes}
     print(json.dumps(doc, indent=1) if args.json else "\n".join(lines))
     return 0
 

@@ -68,8 +68,8 @@ def load_artefact(folder: str | Path) -> FitArtefact:
     if isinstance(doc, dict) and doc.get("kind") == "levels":
         raise IdtoolError(
             f"{folder} is the fit of a friction table (kind: levels), not of bench traces: "
-            "read it with idtool.load_levels_fit; compare, plan, validate and the trace "
-            "fit's API do not apply to it (yet)"
+            "read it with idtool.load_levels_fit (idtool predict, sample, report, compare "
+            "and plan read it too); validate-fit and the trace fit's API do not apply to it"
         )
     try:
         ds_info = doc["dataset"]
