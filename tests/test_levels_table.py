@@ -172,6 +172,19 @@ def test_recovery_truth_inside_the_95_intervals_of_kt_and_mu():
     p = fit.predict(50.0, [0.02, 0.08], amplitude_m=4e-6)
     assert p.pinned.all() and np.all(p.mean_band[0] < p.fr) and np.all(p.fr < p.mean_band[1])
     assert np.all(p.next_band[1] - p.next_band[0] > p.mean_band[1] - p.mean_band[0])
+    # idtool predict --target-reduction on a table: the amplitude for a 50% reduction,
+    # its band where the mean band's ends cross FR 0.5 (checked by predicting there)
+    from types import SimpleNamespace
+
+    from idtool._cli._predict import _amplitude_for
+
+    (inv,) = _amplitude_for(fit, SimpleNamespace(target_reduction=50.0, load=[50.0]), [0.02])
+    a, (lo, hi) = inv["amplitude_fraction"], inv["amplitude_ci95"]
+    assert 0.0 < lo < a < hi <= 1.0, inv
+    q = fit.predict(50.0, 0.02, amplitude_fraction=[lo, a, hi])
+    assert float(q.mean_band[0][0]) == pytest.approx(0.5, abs=2e-3)
+    assert float(q.fr[1]) == pytest.approx(0.5, abs=2e-3)
+    assert float(q.mean_band[1][2]) == pytest.approx(0.5, abs=2e-3)
 
 
 # ------------------------------------------------------------------ a published summary
@@ -270,8 +283,21 @@ def test_cli_import_levels_then_fit(tmp_path, capsys):
     assert any("a load outside the table's 10 N: extrapolated" in w for w in doc["warnings"])
     assert main(argv[:-1]) == 0
     assert "mean FR [95%]" in capsys.readouterr().out
-    assert main([*argv, "--target-reduction", "50"]) == 2
-    assert "--target-reduction: not on a friction table's fit" in capsys.readouterr().err
+    # the amplitude for a 50% reduction: reached at 20.3 mm/s (62% at full amplitude),
+    # where the fit's FR at the stated fraction is 0.5 (to the 400-point grid's linear
+    # interpolation); out of reach at 87 mm/s (29%)
+    argv = ["predict", str(out), "--load", "10", "--target-reduction", "50", "--json"]
+    assert main(argv) == 0
+    slow, fast = json.loads(capsys.readouterr().out)["inverse"]
+    a = slow["amplitude_fraction"]
+    assert 0.0 < a <= 1.0
+    # two rows cannot bound Kt, so FR at small amplitudes is not bounded: no band
+    assert slow["amplitude_ci95"] == [None, None] and "no band" in slow["statement"]
+    fr = float(fit.predict(10.0, 0.0203, amplitude_fraction=a).fr)
+    assert fr == pytest.approx(0.5, abs=2e-3)
+    assert fast["amplitude_fraction"] is None and "out of reach" in fast["statement"]
+    assert main(argv[:-1]) == 0
+    assert "needs amplitude" in capsys.readouterr().out
 
 
 def test_cli_bad_table_exits_2_with_located_errors_and_no_traceback(tmp_path):

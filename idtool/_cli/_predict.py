@@ -89,15 +89,16 @@ def _run_table(args: argparse.Namespace) -> int:
     """``predict`` on a friction table's fit (``idtool.LevelsFit.predict``): FR at the
     grid of loads x amplitude fractions (of the table's reference amplitude) x sliding
     speeds (default: the table's), with the bands at a new condition and of the next
-    measurement."""
-    if args.target_reduction is not None:
-        raise IdtoolError(
-            f"--target-reduction: not on a friction table's fit ({args.fit}) yet; predict "
-            "at several --amplitude fractions and read off the one that reaches it"
-        )
+    measurement; with ``--target-reduction`` the amplitude for it (:func:`_amplitude_for`)."""
     fit = idtool.load_levels_fit(args.fit)
     t = fit.table
     speeds = args.speed or sorted({float(v) for v in t.sliding_speed_m_s})
+    inverse = [] if args.target_reduction is None else _amplitude_for(fit, args, speeds)
+    if args.amplitude is None:
+        doc = {"kind": "levels", "inverse": inverse, "warnings": []}
+        text = "\n".join(i["statement"] for i in inverse)
+        print(json.dumps(doc, indent=1) if args.json else text)
+        return 0
     grid = np.array([(n, a, v) for n in args.load for a in args.amplitude for v in speeds])
     p = fit.predict(grid[:, 0], grid[:, 2], amplitude_fraction=grid[:, 1])
     rows = p.to_rows()
@@ -136,10 +137,74 @@ def _run_table(args: argparse.Namespace) -> int:
                 f"{100 * (1 - fr):.1f} [{100 * (1 - hi):.1f}, {100 * (1 - lo):.1f}]"
             )
         lines.append(f"{n:9g} {a:9g} {v:8g}   {cells}")
+    lines += [i["statement"] for i in inverse]
     lines += [f"warning: {n}" for n in notes]
     doc = {"kind": "levels", "source": source, "predictions": rows, "warnings": notes}
+    doc |= {"inverse": inverse} if inverse else {}
     print(json.dumps(doc, indent=1) if args.json else "\n".join(lines))
     return 0
+
+
+# amplitude fractions searched for a target reduction on a table fit
+_FRACTIONS = np.linspace(0.0025, 1.0, 400)
+
+
+def _amplitude_for(fit, args: argparse.Namespace, speeds: list[float]) -> list[dict]:
+    """The amplitude fraction [-] at which the mean FR reaches the target reduction,
+    per load and speed, on a grid of :data:`_FRACTIONS` (linear between its points):
+    the estimate where the model's FR crosses ``1 - target``, the band where the mean
+    band's ends do (the band's upper end reaching it first gives the lower amplitude)."""
+    target = 1.0 - args.target_reduction / 100.0
+    out = []
+    for n in args.load:
+        for v in speeds:
+            p = fit.predict(n, v, amplitude_fraction=_FRACTIONS)
+            lo_band, hi_band = (np.asarray(b, float) for b in p.mean_band)
+
+            def crossing(curve: np.ndarray) -> float:
+                below = np.flatnonzero(curve <= target)
+                if below.size == 0 or not np.all(np.isfinite(curve)):
+                    return math.inf
+                i = int(below[0])
+                if i == 0:
+                    return float(_FRACTIONS[0])
+                a0, a1, c0, c1 = _FRACTIONS[i - 1], _FRACTIONS[i], curve[i - 1], curve[i]
+                return float(a0 + (a1 - a0) * (c0 - target) / (c0 - c1))
+
+            med, lo, hi = crossing(np.asarray(p.fr)), crossing(lo_band), crossing(hi_band)
+            pinned = bool(np.all(p.pinned))
+            full = (
+                f"full amplitude gives {100 * (1 - float(p.fr[-1])):.1f}% (95% band "
+                f"{100 * (1 - hi_band[-1]):.1f}-{100 * (1 - lo_band[-1]):.1f}%)"
+            )
+            what = f"{args.target_reduction:g}% reduction at {n:g} N, {v:g} m/s"
+            if not pinned:  # the bands are NaN where the table does not bound FR
+                full = f"full amplitude gives {100 * (1 - float(p.fr[-1])):.1f}%"
+                lo = hi = math.nan
+            if not math.isfinite(med):
+                text = f"{what} is out of reach: {full}"
+            elif not pinned:
+                text = (
+                    f"{what} needs amplitude {med:.3f} (no band: the table does not bound "
+                    "FR at every amplitude)"
+                )
+            elif not math.isfinite(hi):
+                text = (
+                    f"{what} needs amplitude {med:.3f} (95% band {lo:.3f} to out of reach: {full})"
+                )
+            else:
+                text = f"{what} needs amplitude {med:.3f} (95% band {lo:.3f}-{hi:.3f})"
+            out.append(
+                {
+                    "normal_load_n": n,
+                    "sliding_speed_m_s": v,
+                    "target_reduction_percent": args.target_reduction,
+                    "amplitude_fraction": None if not math.isfinite(med) else med,
+                    "amplitude_ci95": [x if math.isfinite(x) else None for x in (lo, hi)],
+                    "statement": text,
+                }
+            )
+    return out
 
 
 def register(sub: argparse._SubParsersAction) -> None:
