@@ -50,8 +50,6 @@ def fit_law(
     Raises:
         IdtoolError: an unreadable series (located problems) or an unknown law.
     """
-    import jax.numpy as jnp
-
     if not isinstance(series, Series):
         series = read_series(series)
     start = time.perf_counter()
@@ -69,7 +67,9 @@ def fit_law(
         se = float(se_z[k]) if math.isfinite(se_z[k]) else math.inf
         estimates[p.name] = estimate_from_sides(p, float(opt.z[k]), se, *sides[k])
         by_name[p.name] = sides[k]
-    force = np.asarray(problem.model_force(jnp.asarray(opt.z))[0])
+    # the model's force from the fit's own program run for no step (no program of its
+    # own to trace and compile): the white residuals are (F_model - F) / force_scale
+    force = np.asarray(problem.series.force_n) + lm.linearise(opt.z, 0.0)[0] * problem.force_scale_n
     fit = SeriesFit(
         problem,
         opt,

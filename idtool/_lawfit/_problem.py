@@ -29,8 +29,8 @@ from idtool._data._series import Series
 from idtool._errors import IdtoolError
 from idtool._lawfit._lag import LAG
 from idtool._model._params import Param
-from idtool._model._series_force import series_force
-from idtool._model._series_law import SeriesLaw, scale_of, scaled, series_law
+from idtool._model._series_force import output_force, series_force
+from idtool._model._series_law import SIGMA1, SIGMA2, SeriesLaw, scale_of, scaled, series_law
 
 __all__ = [
     "DRIFT",
@@ -104,9 +104,23 @@ class Model:
         """Parameter values by name [SI] at internal ``z``."""
         return {p.name: data.scales[k] * p.value(z[k]) for k, p in enumerate(self.params)}
 
-    def force(self, data: Data, z):
-        """Force [N] (friction plus the load cell's zero) and bristle force [N] at the
-        samples, at internal ``z``."""
+    @property
+    def lagged(self) -> bool:
+        return any(p.name == LAG.name for p in self.params)
+
+    @property
+    def state_index(self) -> tuple[int, ...]:
+        """The parameters the integrated state depends on (:meth:`state`): not the load
+        cell's zero, nor, without a lag, the damping and viscous terms, which enter the
+        output equation only (paper eq. 3)."""
+        outside = {OFFSET.name, DRIFT.name}
+        if not self.lagged:
+            outside |= {SIGMA1.name, SIGMA2.name}
+        return tuple(k for k, p in enumerate(self.params) if p.name not in outside)
+
+    def state(self, data: Data, z):
+        """The integrated state at the samples: the bristle force [N], or with the lag the
+        recorded force [N] (without the load cell's zero)."""
         values = self.values(data, z)
         law_values = {k: values[k] for k in self.law.names}
         v, load = data.velocity_m_s, data.normal_load_n
@@ -125,14 +139,54 @@ class Model:
             substeps=SUBSTEPS,
             lag_s=values.get(LAG.name),
         )
+        return force if self.lagged else bristle
+
+    def output(self, data: Data, z, state):
+        """The force [N] at the samples from the :meth:`state` (friction, paper eq. 3,
+        plus the load cell's zero)."""
+        values = self.values(data, z)
+        force = state
+        if not self.lagged:
+            law_values = {k: values[k] for k in self.law.names}
+            force = output_force(
+                self.law.law_at,
+                law_values,
+                data.velocity_m_s,
+                data.normal_load_n,
+                state,
+                self.law.extra_viscous_n_s_m(law_values),
+            )
         t = data.time_s
         zero = values[OFFSET.name] + values[DRIFT.name] * (t - t[0]) / (t[-1] - t[0])
-        return force + zero, bristle
+        return force + zero
+
+    def force(self, data: Data, z):
+        """Force [N] (friction plus the load cell's zero) at the samples, at internal
+        ``z``."""
+        return self.output(data, z, self.state(data, z))
 
     def residuals(self, data: Data, z, phi=0.0):
         """Scaled (and whitened) residuals ``(F_model - F) / force_scale``."""
-        r = (self.force(data, z)[0] - data.force_n) / data.force_scale_n
-        return whiten(r, phi)
+        return whiten((self.force(data, z) - data.force_n) / data.force_scale_n, phi)
+
+    def linearised(self, data: Data, z, phi=0.0):
+        """:meth:`residuals` and their Jacobian in ``z`` (n, p): forward mode through the
+        integration in the :attr:`state_index` parameters only (5 of LuGre's 9 without
+        a lag), then through the output equation in all, by the chain rule (the state
+        linear in them about ``z``)."""
+        idx = np.array(self.state_index)
+
+        def state(zs):
+            x = self.state(data, z.at[idx].set(zs))
+            return x, x
+
+        ds, s = jax.jacfwd(state, has_aux=True)(z[idx])
+
+        def resid(zz):
+            x = s + ds @ (zz[idx] - z[idx])
+            return whiten((self.output(data, zz, x) - data.force_n) / data.force_scale_n, phi)
+
+        return resid(z), jax.jacfwd(resid)(z)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -163,22 +217,6 @@ class Problem:
     @property
     def n_physical(self) -> int:
         return self.model.n_physical
-
-    def residuals(self, z, phi=0.0):
-        return _residuals(self.model, self.data, jnp.asarray(z), phi)
-
-    def model_force(self, z):
-        return _force(self.model, self.data, jnp.asarray(z))
-
-
-@functools.partial(jax.jit, static_argnums=0)
-def _residuals(model: Model, data: Data, z, phi):
-    return model.residuals(data, z, phi)
-
-
-@functools.partial(jax.jit, static_argnums=0)
-def _force(model: Model, data: Data, z):
-    return model.force(data, z)
 
 
 def whiten(r, phi):

@@ -2,13 +2,16 @@
 the residuals.
 
 The Jacobian is dense and narrow (a handful of parameters, thousands of samples): it is
-formed by forward-mode products through the :func:`jax.lax.scan` of the integrator, one
-per parameter, with the residuals as their primal, once per LM step. (The project's
-coloured LM, :mod:`idtool._fit._lm`, is for the bench's block-arrow structure;
-optimistix's LevenbergMarquardt took 180 ms a step here against 16 ms for the
-Jacobian itself, on 3,000 samples: 36 s for a LuGre fit.) Every solve is vmapped: the
-multi-start's best few, and the profile refits with one parameter held
-(:mod:`idtool._lawfit._profile`), run as one batch through one compiled program.
+formed by forward-mode products through the integrator in the parameters its state
+depends on, and through the output equation in all
+(:meth:`idtool._lawfit._problem.Model.linearised`), with the residuals as their primal,
+once per LM step. (The project's coloured LM, :mod:`idtool._fit._lm`, is for the
+bench's block-arrow structure; optimistix's LevenbergMarquardt took 180 ms a step here
+against 16 ms for the Jacobian itself, on 3,000 samples: 36 s for a LuGre fit.) Every
+solve is batched: the multi-start's best starts, and the profile refits with one
+parameter held (:mod:`idtool._lawfit._profile`), step together in one loop of one
+compiled program, which also gives the residuals and Jacobian at a point (run for no
+step), so that a fit compiles no other program of its own but the start grid's loss.
 """
 
 from __future__ import annotations
@@ -23,15 +26,17 @@ import numpy as np
 
 from idtool._fit._compiled import QUICK_COMPILE
 from idtool._lawfit._lag import LAG, LagCheck, lag_test
+from idtool._lawfit._lm import REFIT_DECREMENT, dominated, lm_init, lm_step
 from idtool._lawfit._problem import Data, Model, Problem, batch_loss, make_problem, start_grid
 
 __all__ = [
+    "MAIN_DECREMENT",
     "PHI_TRIGGER",
+    "REFIT_DECREMENT",
     "BatchedLM",
     "Optimum",
     "ar1",
     "fit_lag",
-    "levenberg_marquardt",
     "refit_batch",
     "solve",
 ]
@@ -42,13 +47,7 @@ __all__ = [
 PHI_TRIGGER = 0.1
 _BEST_STARTS = 4
 _MAX_STEPS = 200
-_RTOL = 1e-10
-# A profile refit stops once the full Gauss-Newton step would lower -2 log L by less
-# than this: its rise is then within 0.01 of the converged one, beside the 1 and 3.84 it
-# is compared with (idtool._fit._intervals.REFIT_TOL)
-REFIT_DECREMENT = 1e-2
-MAIN_DECREMENT = 1e-4  # the main fit's (levenberg_marquardt's default)
-_MAX_STEP_Z = 1.0
+MAIN_DECREMENT = 1e-4  # the main fit's convergence threshold (idtool._lawfit._lm)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,18 +78,36 @@ class Optimum:
 
 
 @functools.partial(jax.jit, static_argnums=0, compiler_options=QUICK_COMPILE)
-def _lm_batch(model: Model, data: Data, z0, phi, held, value, decrement, max_steps):
+def _lm_batch(model: Model, data: Data, z0, phi, held, value, decrement, max_steps, multistart):
     """LM from each row of ``z0`` with ``z[k, j]`` held at ``value[k, j]`` where
-    ``held[k, j]``, as one vmapped program: ``(z, |r|^2, steps)`` per row."""
+    ``held[k, j]``, the rows stepped together in one loop: ``(z, |r|^2, steps, r, J)``
+    per row (``r`` and ``J`` at ``z``: with ``max_steps`` 0 the residuals and Jacobian
+    at ``z0``, so that the fit needs no program of its own for them). ``multistart``:
+    the rows are starts of one problem, and a row stops once its Gauss-Newton model
+    cannot beat the best converged row (:func:`~idtool._lawfit._lm.dominated`)."""
 
-    def one(z0, held, value):
-        def fn(z):
-            r = model.residuals(data, jnp.where(held, value, z), phi)
-            return r, r
+    def lin(z, held, value):
+        r, j = model.linearised(data, jnp.where(held, value, z), phi)
+        return r, j * ~held  # a held entry does not move
 
-        return levenberg_marquardt(fn, jnp.where(held, value, z0), decrement, max_steps)
+    z0 = jnp.where(held, value, z0)
+    state = jax.vmap(lambda z: lm_init(z, data.force_n.shape[0]))(z0)
 
-    return jax.vmap(one)(z0, held, value)
+    def running(state):
+        # the start is evaluated whatever the budget (``max_steps`` 0: r and J at z0)
+        return (state.steps < 0) | ((state.steps < max_steps) & ~state.done)
+
+    def body(state):
+        new = jax.vmap(
+            lambda s, h, v: lm_step(functools.partial(lin, held=h, value=v), decrement, s)
+        )(state, held, value)
+        active = running(state)
+        new = jax.tree.map(lambda a, b: jnp.where(_rows(active, a), a, b), new, state)
+        # (a traced flag: the main solve and the profile refits share one program)
+        return new._replace(done=new.done | (multistart & dominated(new)))
+
+    out = jax.lax.while_loop(lambda s: jnp.any(running(s)), body, state)
+    return out.z, jnp.sum(out.r * out.r, axis=1), out.steps, out.r, out.j
 
 
 @dataclasses.dataclass(frozen=True)
@@ -98,29 +115,32 @@ class BatchedLM:
     """:func:`_lm_batch` on one problem, every call padded to ``width`` rows (copies of
     its first row, which converge with it: no extra steps): one batch shape, one
     compiled program per fit (a second shape was 2-5 s of a 13 s first fit of 10,000
-    samples). The width is the profile's, two refits per physical parameter; the
-    integration's scan is latency-bound, so rows in one batch cost little more than one
-    (chunks of four rows instead doubled a presliding fit's time)."""
+    samples). The width is the profile's, two refits per physical parameter (chunks of
+    four rows instead doubled a presliding fit's time)."""
 
     model: Model
     data: Data
     width: int
 
-    def __call__(self, z0, phi, held, value, decrement, max_steps=_MAX_STEPS):
+    def __call__(self, z0, phi, held, value, decrement, max_steps=_MAX_STEPS, multistart=False):
         """LM from the rows of ``z0`` (k, p) with the entries ``held`` (k, p) held at
-        ``value`` (k, p)."""
+        ``value`` (k, p); ``multistart``: the rows are starts of one problem
+        (:func:`_lm_batch`). Returns ``z`` (k, p), ``|r|^2`` (k,) and the steps (k,) in
+        NumPy, and the residuals and Jacobian at ``z`` as the program's arrays (rows past
+        k are padding)."""
         k = z0.shape[0]
         if k > self.width:
             raise ValueError(f"z0: {k} rows, more than the batch width {self.width}")
         pad = self.width - k
 
         def padded(x):
+            # (NumPy in: jnp.asarray here compiled a staging program per shape)
             x = np.asarray(x)
-            return jnp.asarray(np.concatenate([x, np.repeat(x[:1], pad, axis=0)]))
+            return np.concatenate([x, np.repeat(x[:1], pad, axis=0)])
 
         # (every argument typed alike on every call: a weakly typed number is a new
         # program)
-        z, loss, steps = _lm_batch(
+        z, loss, steps, r, j = _lm_batch(
             self.model,
             self.data,
             padded(z0),
@@ -129,8 +149,18 @@ class BatchedLM:
             padded(value),
             np.float64(decrement),
             np.int64(max_steps),
+            np.bool_(multistart),
         )
-        return z[:k], loss[:k], steps[:k]
+        # cut in NumPy: a JAX slice is one more program to compile for every k
+        return np.asarray(z)[:k], np.asarray(loss)[:k], np.asarray(steps)[:k], r, j
+
+    def linearise(self, z, phi) -> tuple[np.ndarray, np.ndarray]:
+        """The residuals (n,) and their Jacobian (n, p) at ``z``, whitened at ``phi``:
+        the program run for no step."""
+        z = np.asarray(z, float)[None]
+        _, _, _, r, j = self(z, phi, np.zeros(z.shape, bool), z, 0.0, 0)
+        # indexed in NumPy: a JAX index compiles two programs per shape
+        return np.asarray(r)[0], np.asarray(j)[0]
 
 
 def _lm(problem: Problem) -> BatchedLM:
@@ -138,66 +168,9 @@ def _lm(problem: Problem) -> BatchedLM:
     return BatchedLM(problem.model, problem.data, max(_BEST_STARTS, 2 * problem.n_physical))
 
 
-def levenberg_marquardt(fn, z0, decrement=1e-4, max_steps=_MAX_STEPS):
-    """Minimise ``|r(z)|^2`` (``fn(z) -> (r, r)``) by Levenberg-Marquardt with Moré's
-    scaling and Nielsen's damping update (Madsen, Nielsen & Tingleff 2004, Algorithm
-    3.16, as :mod:`idtool._fit._lm`), the Jacobian by forward mode (one pass of the
-    scan per parameter, with the residuals as its primal). Stops when the full
-    Gauss-Newton step would lower -2 log L by less than ``decrement`` (the main fit's
-    test of an optimum; 1e-2 for a profile's refits, as :data:`REFIT_DECREMENT`), or a
-    step changes z by less than ``_RTOL`` (relative).
-    Returns ``(z, |r|^2, steps)``; pure JAX (a ``lax.while_loop``)."""
-    jac = jax.jacfwd(fn, has_aux=True)
-
-    def lin(z):
-        j, r = jac(z)
-        return r, j
-
-    r0, j0 = lin(z0)
-    a0 = j0.T @ j0
-    state0 = (z0, r0, j0, 1e-3 * jnp.max(jnp.diag(a0)), 2.0, 0, False)
-
-    def cond(state):
-        return (state[5] < max_steps) & ~state[6]
-
-    def body(state):
-        z, r, j, mu, nu, k, _ = state
-        a, g = j.T @ j, j.T @ r
-        # Moré's scaling, floored: a parameter in its sigmoid's tail (diag ~ 1e-15 of
-        # the others) would otherwise get a huge step that the cap below turns into a
-        # step along it alone, and LM would crawl along the flat tail
-        d = jnp.maximum(jnp.diag(a), 1e-6 * jnp.max(jnp.diag(a)))
-        d = jnp.where(d > 0, d, 1.0)
-        h = jnp.linalg.solve(a + mu * jnp.diag(d), -g)
-        # at most _MAX_STEP_Z on the internal scale: a longer Gauss-Newton step can jump
-        # a bounded parameter into its sigmoid's flat tail, where no gradient brings it
-        # back (a LuGre static ratio at 1, its Stribeck velocity at a bound)
-        h = h * jnp.minimum(1.0, _MAX_STEP_Z / jnp.max(jnp.abs(h)))
-        # the Gauss-Newton decrement, in residual variances: the loss the full GN step
-        # would still gain; below _DECREMENT the optimum is reached
-        gn = jnp.linalg.solve(a + 1e-12 * jnp.diag(d), g)
-        variance = (r @ r) / jnp.maximum(r.size - z.size, 1)
-        converged = g @ gn <= decrement * variance
-        z_new = z + h
-        r_new, j_new = lin(z_new)
-        loss, loss_new = r @ r, r_new @ r_new
-        predicted = -(2.0 * g @ h + h @ a @ h)  # loss - |r + J h|^2
-        rho = (loss - loss_new) / jnp.where(predicted > 0, predicted, 1.0)
-        ok = jnp.isfinite(loss_new) & (loss_new < loss)
-        small = converged | (jnp.linalg.norm(h) <= _RTOL * (jnp.linalg.norm(z) + _RTOL))
-        mu_ok = mu * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
-        return (
-            jnp.where(ok & ~converged, z_new, z),
-            jnp.where(ok & ~converged, r_new, r),
-            jnp.where(ok & ~converged, j_new, j),
-            jnp.where(ok, mu_ok, mu * nu),
-            jnp.where(ok, 2.0, 2.0 * nu),
-            k + 1,
-            small | (mu > 1e30),
-        )
-
-    z, r, _, _, _, k, _ = jax.lax.while_loop(cond, body, state0)
-    return z, r @ r, k
+def _rows(mask, x):
+    """``mask`` (rows,) broadcast against ``x`` (rows, ...)."""
+    return mask.reshape(mask.shape + (1,) * (x.ndim - 1))
 
 
 def ar1(r: np.ndarray) -> float:
@@ -214,7 +187,7 @@ def solve(problem: Problem, starts: np.ndarray | None = None) -> tuple[Optimum, 
     lm = _lm(problem)
     if starts is None:
         grid = start_grid(problem)
-        losses = np.asarray(batch_loss(problem.model, problem.data, jnp.asarray(grid)))
+        losses = np.asarray(batch_loss(problem.model, problem.data, grid))
         # as many starts as the batch holds (two per physical parameter, at least
         # four): on a presliding series the main solve from 12 starts left an optimum
         # whose profile refits converged sooner, 44 s a fit against 63 s from 4 starts
@@ -222,35 +195,44 @@ def solve(problem: Problem, starts: np.ndarray | None = None) -> tuple[Optimum, 
         rows = grid[np.argsort(np.where(np.isfinite(losses), losses, np.inf))[: lm.width]]
     else:
         rows = np.asarray(starts, float)
-    z_white, step_count = _best(lm, rows)
-    r = np.asarray(problem.residuals(jnp.asarray(z_white)))
-    n = r.size
-    phi_white = ar1(r)
+    best = _best(lm, rows)
+    n = best.r.size
+    phi_white = ar1(best.r)
     phi = 0.0
-    z_opt = z_white
     if abs(phi_white) > max(PHI_TRIGGER, 3.0 / math.sqrt(n)):
         # Cochrane-Orcutt: refit on the innovations, re-estimate phi, refit once more
         phi = phi_white
         for _ in range(2):
-            z_opt, step_count = _best(lm, z_opt[None], phi)
-            phi = ar1(np.asarray(problem.residuals(jnp.asarray(z_opt))))
+            best = _best(lm, best.z[None], phi)
+            phi = ar1(lm.linearise(best.z, 0.0)[0])
         phi = float(np.clip(phi, -0.99, 0.99))
-    zj = jnp.asarray(z_opt)
-    rw = np.asarray(problem.residuals(zj, phi))
-    jac = np.asarray(_jacobian(problem.model, problem.data, zj, phi))
-    rss = float(rw @ rw)
+        r, j = lm.linearise(best.z, phi)
+        best = dataclasses.replace(best, r=r, j=j)
+    z_opt, step_count, jac = best.z, best.steps, best.j
+    rss = float(best.r @ best.r)
     sigma2 = rss / (n - z_opt.size)
     cov = sigma2 * _pinv(jac.T @ jac)
     return Optimum(z_opt, cov, rss, sigma2, phi, phi_white, step_count), lm
 
 
+@dataclasses.dataclass(frozen=True)
+class _Best:
+    """A multi-start's best row: internal ``z``, LM steps, and the whitened residuals
+    (n,) and Jacobian (n, p) there."""
+
+    z: np.ndarray
+    steps: int
+    r: np.ndarray
+    j: np.ndarray
+
+
 def _best(lm: BatchedLM, rows, phi=0.0, decrement=MAIN_DECREMENT, max_steps=_MAX_STEPS):
-    """LM from each row (nothing held); the best row's z and its steps."""
+    """LM from each row (nothing held), whitened at ``phi``: the best row."""
     rows = np.asarray(rows, float)
     held = np.zeros(rows.shape, bool)
-    z, loss, steps = lm(rows, phi, held, rows, decrement, max_steps)
-    best = int(np.nanargmin(np.asarray(loss)))
-    return np.asarray(z[best]), int(steps[best])
+    z, loss, steps, r, j = lm(rows, phi, held, rows, decrement, max_steps, multistart=True)
+    k = int(np.nanargmin(loss))
+    return _Best(z[k], int(steps[k]), np.asarray(r)[k], np.asarray(j)[k])
 
 
 # The lag's starts, in sample intervals: a lag and the bristles' compliance both delay
@@ -275,20 +257,15 @@ def fit_lag(problem: Problem, optimum: Optimum) -> tuple[Problem, Optimum, Batch
     k = len(problem.params)  # the lag is declared last
     pick = np.linspace(0, len(LAG_STARTS) - 1, min(lm.width, len(LAG_STARTS))).round()
     rows = np.array([np.append(optimum.z, LAG.internal(LAG_STARTS[int(i)])) for i in pick])
-    z_lag, _ = _best(lm, rows, optimum.phi, REFIT_DECREMENT, LAG_STEPS)
+    lagged = _best(lm, rows, optimum.phi, REFIT_DECREMENT, LAG_STEPS)
+    z_lag, rss = lagged.z, float(lagged.r @ lagged.r)
     n = problem.series.n_samples
-    rss = np.asarray(lagged_problem.residuals(jnp.asarray(z_lag), optimum.phi))
     lag_s = float(lagged_problem.params[k].value(z_lag[k]))
-    check = lag_test(lag_s, (optimum.rss, n, optimum.phi), (float(rss @ rss), n, optimum.phi))
+    check = lag_test(lag_s, (optimum.rss, n, optimum.phi), (rss, n, optimum.phi))
     if not check.fitted:
         return problem, dataclasses.replace(optimum, lag_check=check), None
     lagged_opt, _ = solve(lagged_problem, z_lag[None])
     return lagged_problem, dataclasses.replace(lagged_opt, lag_check=check), lm
-
-
-@functools.partial(jax.jit, static_argnums=0)
-def _jacobian(model: Model, data: Data, z, phi):
-    return jax.jacfwd(lambda zz: model.residuals(data, zz, phi))(z)
 
 
 def _pinv(a: np.ndarray) -> np.ndarray:
@@ -311,6 +288,5 @@ def refit_batch(lm, optimum: Optimum, index: np.ndarray, value: np.ndarray, star
     z0[np.arange(k), index] = value
     held = np.zeros(z0.shape, bool)
     held[np.arange(k), index] = True
-    z, loss, _ = lm(z0, optimum.phi, held, z0, REFIT_DECREMENT)
-    z, loss = np.asarray(z), np.asarray(loss)
+    z, loss, *_ = lm(z0, optimum.phi, held, z0, REFIT_DECREMENT)
     return z, (loss - optimum.rss) / optimum.sigma2

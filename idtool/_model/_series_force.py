@@ -28,8 +28,11 @@ At each sample the friction force is (paper eq. 3)
 
 with ``c_v`` an extra viscous coefficient [N s/m] (zero unless a ``-viscous`` law asks
 for it: ``coulomb-viscous`` is ``F = Fc sgn(V) + c_v V``, with the exact sign, not a
-smoothed one). The loop over samples is a :func:`jax.lax.scan`, differentiable in the
-parameters.
+smoothed one). Every piece's update is an affine map of the bristle force whose
+coefficients do not depend on it, so the maps of all intervals are computed at once and
+only their composition, a few operations a sample, runs in a :func:`jax.lax.scan`
+(differentiable in the parameters; forward derivatives through a scan of the whole
+update cost 20 times its value, 39 ms against 3 ms for 10,000 samples and 5 tangents).
 
 With ``lag_s`` the recorded force is ``y``, the friction force through a first-order
 sensor, ``lag_s y' + y = F``, integrated in the same scan on the parts' grid with ``F``
@@ -49,11 +52,34 @@ from jaxtyping import Array, ArrayLike, Float
 
 from idtool._model._laws import AbstractFrictionLaw
 
-__all__ = ["LawAt", "force_at", "output_force", "piece_update", "series_force"]
+__all__ = [
+    "LawAt",
+    "force_at",
+    "force_map",
+    "output_force",
+    "piece_map",
+    "piece_update",
+    "series_force",
+]
 
 # A law at a normal load [N]: (values by name, load) -> law (AbstractFrictionLaw.at_load
 # with the caller's extras set, e.g. LuGre's damping).
 LawAt = Callable[[Mapping[str, ArrayLike], Float[ArrayLike, ""]], AbstractFrictionLaw]
+
+
+def piece_map(
+    law: AbstractFrictionLaw, du_m: Float[ArrayLike, "*b"], v_mid_m_s: Float[ArrayLike, "*b"]
+) -> tuple[Float[Array, "*b"], Float[Array, "*b"]]:
+    """The affine map ``fb -> a fb + b`` of the bristle force [N] over a piece of slip
+    ``du_m`` [m] of one sign, the level taken at ``v_mid_m_s`` [m/s] (notes §4:
+    ``fb <- s L + (fb - s L) exp(-kappa)``); the identity over a piece of no slip. It
+    does not depend on ``fb``, so the maps of every interval are computed at once and
+    only their composition runs sample by sample."""
+    du = jnp.asarray(du_m)
+    level = law.level_n(v_mid_m_s)
+    decay = jnp.exp(-law.decay_exponent(jnp.abs(du), level))
+    moves = du != 0.0
+    return jnp.where(moves, decay, 1.0), jnp.where(moves, jnp.sign(du) * level * (1.0 - decay), 0.0)
 
 
 def piece_update(
@@ -63,14 +89,9 @@ def piece_update(
     v_mid_m_s: Float[ArrayLike, "*b"],
 ) -> Float[Array, "*b"]:
     """The bristle force [N] after a piece of slip ``du_m`` [m] of one sign, the level
-    taken at ``v_mid_m_s`` [m/s] (notes §4's affine map); a piece of no slip leaves it."""
-    du = jnp.asarray(du_m)
-    s = jnp.sign(du)
-    level = law.level_n(v_mid_m_s)
-    decay = jnp.exp(-law.decay_exponent(jnp.abs(du), level))
-    target = s * level
-    moved = target + (jnp.asarray(fb_n) - target) * decay
-    return jnp.where(du != 0.0, moved, fb_n)
+    taken at ``v_mid_m_s`` [m/s] (:func:`piece_map`)."""
+    a, b = piece_map(law, du_m, v_mid_m_s)
+    return a * jnp.asarray(fb_n) + b
 
 
 def _split(v_a, v_b, dt):
@@ -131,44 +152,74 @@ def series_force(
     fractions = jnp.arange(substeps + 1) / substeps
     fb0 = jnp.asarray(fb0_n, float)
 
-    def parts(law, fb, va, vb, h):
-        """The bristle force at the end of each part of the interval."""
+    def part_maps(law, va, vb, h):
+        """Per part of the interval, the affine map ``(a, b)`` of the bristle force from
+        the interval's start to the part's end (its pieces composed), and V there."""
         vs = va + (vb - va) * fractions
+        a, b = jnp.ones(()), jnp.zeros(())
         out = []
         for j in range(substeps):
-            (du1, vm1), (du2, vm2) = _split(vs[j], vs[j + 1], h / substeps)
-            fb = piece_update(law, fb, du1, vm1)
-            fb = piece_update(law, fb, du2, vm2)
-            out.append((fb, vs[j + 1]))
+            for du, vm in _split(vs[j], vs[j + 1], h / substeps):
+                ap, bp = piece_map(law, du, vm)
+                a, b = ap * a, ap * b + bp
+            out.append((a, b, vs[j + 1]))
         return out
 
     if lag_s is None:
 
-        def step(fb, x):
-            va, vb, h, n_mid = x
-            fb = parts(law_at(values, n_mid), fb, va, vb, h)[-1][0]
+        def interval_map(va, vb, h, n_mid):
+            """The interval's affine map of the bristle force."""
+            a, b, _ = part_maps(law_at(values, n_mid), va, vb, h)[-1]
+            return a, b
+
+        # the maps of all intervals at once; only their composition, two operations
+        # a sample, runs in the scan (forward derivatives through a scan of the whole
+        # update cost 20x its value: 39 ms against 3 ms for 10,000 samples)
+        maps = jax.vmap(interval_map)(v_start, v_end, dt, load_mid)
+
+        def step(fb, ab):
+            fb = ab[0] * fb + ab[1]
             return fb, fb
 
-        _, fb_rest = jax.lax.scan(step, fb0, (v_start, v_end, dt, load_mid))
+        _, fb_rest = jax.lax.scan(step, fb0, maps)
         fb = jnp.concatenate([fb0[None], fb_rest])
         return output_force(law_at, values, v, load, fb, extra_viscous_n_s_m), fb
 
     tau = jnp.asarray(lag_s, float)
     f0 = force_at(law_at(values, load[0]), fb0, v[0], extra_viscous_n_s_m)
 
-    def step_lagged(carry, x):
-        fb, y, f_prev = carry
-        va, vb, h, n_mid = x
+    def lagged_map(va, vb, h, n_mid):
+        """The interval's map of ``(fb, y, F)`` at its start (bristle force, recorded
+        force, friction force) to its end, affine: ``fb' = A fb + B``, ``F' = P fb + Q``
+        and ``y' = Y y + U fb + W F + H``, the parts' sensor updates composed."""
         law = law_at(values, n_mid)
         hp = h / substeps
         a = jnp.exp(-hp / tau)
-        for fb_part, v_end_part in parts(law, fb, va, vb, h):
-            f = force_at(law, fb_part, v_end_part, extra_viscous_n_s_m)
-            y = f + a * (y - f_prev) - tau * (1.0 - a) * (f - f_prev) / hp
+        c = tau * (1.0 - a) / hp
+        # y and the previous part's F as (coefficients of y, fb, F at the start; constant)
+        y = (jnp.ones(()), jnp.zeros(()), jnp.zeros(()), jnp.zeros(()))
+        f_prev = (jnp.zeros(()), jnp.zeros(()), jnp.ones(()), jnp.zeros(()))
+        for ap, bp, v_part in part_maps(law, va, vb, h):
+            # F = fb + s1 dz/dt + s2 V is affine in fb (paper eq. 3)
+            alpha, beta = force_map(law, v_part, extra_viscous_n_s_m)
+            f = (jnp.zeros(()), alpha * ap, jnp.zeros(()), alpha * bp + beta)
+            # y <- F + a (y - F_prev) - lag (1 - a) (F - F_prev) / h_part
+            y = tuple(
+                (1.0 - c) * fi + (c - a) * gi + a * yi
+                for fi, gi, yi in zip(f, f_prev, y, strict=True)
+            )
             f_prev = f
-        return (fb_part, y, f_prev), (fb_part, y)
+        return ap, bp, f_prev[1], f_prev[3], *y
 
-    _, (fb_rest, y_rest) = jax.lax.scan(step_lagged, (fb0, f0, f0), (v_start, v_end, dt, load_mid))
+    maps = jax.vmap(lagged_map)(v_start, v_end, dt, load_mid)
+
+    def step_lagged(carry, m):
+        fb, y, f = carry
+        a, b, p, q, yy, yu, yw, yh = m
+        y = yy * y + yu * fb + yw * f + yh
+        return (a * fb + b, y, p * fb + q), (a * fb + b, y)
+
+    _, (fb_rest, y_rest) = jax.lax.scan(step_lagged, (fb0, f0, f0), maps)
     return jnp.concatenate([f0[None], y_rest]), jnp.concatenate([fb0[None], fb_rest])
 
 
@@ -179,10 +230,22 @@ def force_at(
     extra_viscous_n_s_m: Float[ArrayLike, ""] = 0.0,
 ) -> Float[Array, ""]:
     """``F = fb + s1 dz/dt + s2 V + c_v V`` [N] of one law at one point (paper eq. 3)."""
+    alpha, beta = force_map(law, velocity_m_s, extra_viscous_n_s_m)
+    return alpha * jnp.asarray(fb_n) + beta
+
+
+def force_map(
+    law: AbstractFrictionLaw,
+    velocity_m_s: Float[ArrayLike, ""],
+    extra_viscous_n_s_m: Float[ArrayLike, ""] = 0.0,
+) -> tuple[Float[Array, ""], Float[Array, ""]]:
+    """:func:`force_at` as the affine map ``fb -> alpha fb + beta`` [N]: with ``dz/dt =
+    V - |V| fb / L(V)`` (``z = fb / Kt``), ``alpha = 1 - s1 |V| / L(V)`` and ``beta =
+    (s1 + s2 + c_v) V``."""
     v = jnp.asarray(velocity_m_s)
-    dz_dt = v - jnp.abs(v) * fb_n / law.level_n(v)  # [m/s]: dz/dt = V - |V| z / g, z = fb / Kt
+    s1 = law.bristle_damping_n_s_m()
     s2 = law.viscous_n_s_m() + extra_viscous_n_s_m
-    return jnp.asarray(fb_n + law.bristle_damping_n_s_m() * dz_dt + s2 * v)
+    return 1.0 - s1 * jnp.abs(v) / law.level_n(v), (s1 + s2) * v
 
 
 def output_force(
