@@ -6,8 +6,9 @@ and the power limit, Kt 2e6 N/m, mu 0.3; the gain 0.3, or 1.0 for the normal dir
 so that it reduces friction measurably), for each direction and departure (none: the
 fit's own error model; heavy-tailed scatter; a sublinear coupling no law has; a gain
 falling with the load (twice the gain then); the horn's gain drifting over the
-campaign), fitted by ``idtool.fit_levels`` with its defaults (by design: the power limit
-and the load-power law, BIC choosing) and the right direction. Scored: Kt and mu
+campaign, with the rows' measurement times recorded (``gain-drift-timed``: the fit then
+fits the drift) or not), fitted by ``idtool.fit_levels`` with its defaults (by design:
+the power limit and the load-power law, BIC choosing) and the right direction. Scored: Kt and mu
 inside their 95% intervals (an interval stated one-sided runs to the range's end, as
 the report states it), the median Kt / truth, the mean band's coverage of the true FR
 at three held-out conditions inside the tested range (with a fresh discrepancy draw,
@@ -43,7 +44,10 @@ import numpy as np
 
 HELD_OUT = ((35.0, 3e-6, 0.05), (70.0, 5e-6, 0.03), (70.0, 3e-6, 0.05))
 DIRECTIONS = ("along", "transverse", "normal")
-TABLE_CASES = (None, "heavy-tails", "sublinear-coupling", "load-coupling", "gain-drift")
+TABLE_CASES = (
+    None, "heavy-tails", "sublinear-coupling", "load-coupling", "gain-drift", "gain-drift-timed"
+)  # fmt: skip
+TIMED = "-timed"  # a case's suffix: the table records when each row was measured
 SERIES_CASES = (None, "coloured", "hum", "drift", "lag")
 
 
@@ -56,7 +60,11 @@ def table_row(direction: str, departure: str | None, seed: int) -> dict:
         truth["coupling_gain"] = 1.0
     if departure == "load-coupling":  # exp(-N / 60 N): 0.19 of the gain at 100 N
         truth["coupling_gain"] *= 2.0
-    table = idtool.simulate_table(seed, truth=truth, direction=direction, departure=departure)
+    timed = departure is not None and departure.endswith(TIMED)
+    departure = departure.removesuffix(TIMED) if departure else None
+    table = idtool.simulate_table(
+        seed, truth=truth, direction=direction, departure=departure, record_times=timed
+    )
     started = time.perf_counter()
     fit = idtool.fit_levels(table, direction=direction, seed=seed)
     seconds = time.perf_counter() - started
@@ -77,7 +85,7 @@ def table_row(direction: str, departure: str | None, seed: int) -> dict:
     return {
         "kind": "table",
         "direction": direction,
-        "departure": departure or "none",
+        "departure": (departure or "none") + (TIMED if timed else ""),
         "seed": seed,
         "inside": inside,
         "Kt_ratio": fit.estimates["Kt"].estimate / truth["Kt"],

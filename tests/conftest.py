@@ -202,6 +202,7 @@ FILE_SECONDS: dict[str, float] = {
     "tests/test_arviz.py": 120,
     "tests/test_fit_law.py": 240,
     "tests/test_levels_discrepancy.py": 20,
+    "tests/test_levels_drift.py": 110,
     "tests/test_relaxing_on.py": 107,
     "tests/test_report.py": 104,
     "tests/test_lm.py": 84,

@@ -132,12 +132,16 @@ def table_csv(table: idtool.LevelsTable, path):
     """``table`` (one frequency, 22 kHz; forces, no standard errors) as the CSV
     ``idtool import-levels`` reads, at ``path`` (returned): the simulated tables'
     round trip of tests/test_levels_compare.py, test_levels_choice.py and
-    test_levels_plan.py."""
-    lines = ["load (N),amplitude (um),frequency (kHz),speed (mm/s),off (N),on (N),repeat"] + [
+    test_levels_plan.py; with a ``time (min)`` column when the table has its rows'
+    times."""
+    timed = table.has_times
+    lines = ["load (N),amplitude (um),frequency (kHz),speed (mm/s),off (N),on (N),repeat"
+             + (",time (min)" if timed else "")] + [
         f"{n},{a * 1e6},22,{v * 1e3},{float(off)!r},{float(on)!r},{r}"
-        for n, a, v, off, on, r in zip(
+        + (f",{float(t) / 60.0!r}" if timed else "")
+        for n, a, v, off, on, r, t in zip(
             table.normal_load_n, table.amplitude_m, table.sliding_speed_m_s, table.off,
-            table.on, table.repeat, strict=True,
+            table.on, table.repeat, table.time_s, strict=True,
         )
     ]  # fmt: skip
     path.write_text("\n".join(lines) + "\n")

@@ -51,19 +51,25 @@ def _run(args: argparse.Namespace) -> int:
 def levels_summary(table: Any) -> str:
     """What ``import-levels`` and ``validate`` print about a :class:`idtool.LevelsTable`."""
     _, first = table.operating_points
+    timed = table.has_times
     lines = [
         f"{table.n_rows} row(s), {first.size} condition(s) as dataset '{table.name}' "
         f"({table.material}); friction as {table.friction}",
         f"folder  {table.path}",
         f"sha256  {table.sha256}",
-        "  load [N]  amplitude [um]  frequency [Hz]  speed [mm/s]    OFF      ON     FR",
+        "  load [N]  amplitude [um]  frequency [Hz]  speed [mm/s]    OFF      ON     FR"
+        + ("  time [min]" if timed else ""),
     ]
     for i in range(table.n_rows):
         lines.append(
             f"  {table.normal_load_n[i]:8.4g}  {table.amplitude_m[i] * 1e6:14.4g}  "
             f"{table.vibration_frequency_hz[i]:14.6g}  {table.sliding_speed_m_s[i] * 1e3:12.4g}"
             f"  {table.off[i]:6.4g}  {table.on[i]:6.4g}  {table.friction_ratio[i]:.3f}"
+            + (f"  {table.time_s[i] / 60.0:10.4g}" if timed else "")
         )
+    if timed:
+        hours = float(table.time_s.max() - table.time_s.min()) / 3600.0
+        lines.append(f"measured over {hours:.3g} h: the fit fits the horn's drift over them")
     return "\n".join(lines)
 
 
@@ -78,7 +84,9 @@ def register(sub: argparse._SubParsersAction) -> None:
             "(datasets_schema/levels_table.schema.json) that 'idtool fit' fits. Headers "
             "name the columns and their units: load, amplitude (%, fraction, m, mm, um, "
             "nm), frequency (Hz, kHz), speed (m/s, mm/s), off and on (a force unit, or none "
-            "for a coefficient), optional off se, on se (standard errors) and repeat; "
+            "for a coefficient), optional off se, on se (standard errors), repeat, and "
+            "time (s, min, h: when each row was measured, in every row; the fit then "
+            "fits a drift of the horn over the campaign); "
             "values are converted to SI. Written to a temporary folder, validated, then "
             "renamed into place; on any problem nothing is written and every problem is "
             "listed with its file, row and column.",

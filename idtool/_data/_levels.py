@@ -6,7 +6,9 @@ one ``dataset.json`` (``"kind": "levels"``, schema ``datasets_schema/levels_tabl
 whose ``rows`` are the measurements in SI units: normal load [N], vibration amplitude
 [m] (and the commanded fraction, if the table gave one), vibration frequency [Hz],
 sliding speed [m/s], OFF and ON friction (force [N] or coefficient [-], as ``friction``
-says), optional standard errors of each and an optional repeat id.
+says), optional standard errors of each, an optional repeat id and, optionally on every
+row, when it was measured [s] (the fit then lets the horn's output drift over the
+campaign: :mod:`idtool._levels._model`).
 ``idtool import-levels`` (:func:`idtool._data._levels_read.import_levels`) writes one
 from a CSV table with units in its headers.
 """
@@ -36,7 +38,7 @@ _NUMBERS = (
     "off",
     "on",
 )
-_OPTIONAL = ("amplitude_fraction", "off_se", "on_se")
+_OPTIONAL = ("amplitude_fraction", "off_se", "on_se", "time_s")
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -54,6 +56,8 @@ class LevelsTable:
         off, on: friction OFF and ON (N or -, as ``friction``).
         off_se, on_se: their standard errors (NaN: not given).
         repeat: repeat id per row ("" if none).
+        time_s: when each row was measured [s], any origin (NaN on every row, or
+            empty: not given; given on some rows only is an error).
         max_amplitude_m: the rig's amplitude at 100% command [m], or None.
         source: citation text ("" if none).
         path: the folder, or None for a table made in memory.
@@ -73,6 +77,7 @@ class LevelsTable:
     off_se: np.ndarray
     on_se: np.ndarray
     repeat: tuple[str, ...]
+    time_s: np.ndarray = dataclasses.field(default_factory=lambda: np.empty(0))
     max_amplitude_m: float | None = None
     source: str = ""
     description: str = ""
@@ -81,6 +86,8 @@ class LevelsTable:
 
     def __post_init__(self):
         n = np.size(self.off)
+        if np.size(self.time_s) == 0:  # not given
+            object.__setattr__(self, "time_s", np.full(n, np.nan))
         for name in (*_NUMBERS, *_OPTIONAL):
             value = np.asarray(getattr(self, name), float)
             if value.shape != (n,):
@@ -90,6 +97,26 @@ class LevelsTable:
             raise IdtoolError(f"repeat has {len(self.repeat)} entries; off has {n}")
         if self.friction not in ("force", "coefficient"):
             raise IdtoolError(f"friction {self.friction!r}: say 'force' or 'coefficient'")
+        given = np.isfinite(self.time_s)
+        if given.any() and not given.all():
+            raise IdtoolError(
+                f"time_s is given on {int(given.sum())} of {n} rows: give every row's time or none"
+            )
+
+    @property
+    def has_times(self) -> bool:
+        """Every row's measurement time is given, and they are not all the same."""
+        return bool(np.all(np.isfinite(self.time_s)) and np.ptp(self.time_s) > 0.0)
+
+    @property
+    def campaign_position(self) -> np.ndarray:
+        """Each row's place in the campaign, ``(t - t_mid) / (t_last - t_first)`` in
+        [-1/2, 1/2] with ``t_mid`` the campaign's middle (0 on every row without
+        :attr:`has_times`): the horn drift's clock (:mod:`idtool._levels._model`)."""
+        if not self.has_times:
+            return np.zeros(self.n_rows)
+        t = self.time_s
+        return (t - 0.5 * (t.min() + t.max())) / np.ptp(t)
 
     @property
     def n_rows(self) -> int:
@@ -166,6 +193,17 @@ def levels_from_document(
     if problems:
         raise IdtoolError(f"{file}: not a valid levels dataset", problems)
     rows = doc["rows"]
+    timed = ["time_s" in r for r in rows]
+    if any(timed) and not all(timed):
+        message = (
+            f"time_s is given on {sum(timed)} of {len(rows)} rows: give every row's "
+            "measurement time, or none"
+        )
+        first = timed.index(False)
+        where = f"rows[{first}].time_s"
+        raise IdtoolError(
+            f"{file}: not a valid levels dataset", [Problem(message, file, None, where)]
+        )
 
     def column(key: str) -> np.ndarray:
         return np.array([float(r.get(key, np.nan)) for r in rows])

@@ -15,6 +15,7 @@ the amplitude). Every problem is located by file, row and column, and says what 
 | OFF, ON friction | ``off``, ``on`` (``friction off``, ``mu off``) | force, or none: coefficient |
 | standard errors (optional) | ``off se``, ``on se`` | as OFF and ON |
 | repeat id (optional) | ``repeat`` | text |
+| measurement time (optional, every row) | ``time``, ``measured at``, ``clock`` | s, min, h, ... |
 """
 
 from __future__ import annotations
@@ -53,8 +54,13 @@ COLUMNS: dict[str, tuple[tuple[str, ...], dict[str, float] | None]] = {
     "on": (("on", "friction on", "mu on", "f on", "on friction", "cof on"), None),
     "off_se": (("off se", "se off", "friction off se", "mu off se", "f off se"), None),
     "on_se": (("on se", "se on", "friction on se", "mu on se", "f on se"), None),
+    "time_s": (
+        ("time", "measured at", "time measured", "measurement time", "clock", "elapsed time"),
+        {**QUANTITIES["time"], "h": 3600.0},
+    ),
 }
-_OPTIONAL = ("off_se", "on_se")
+_OPTIONAL = ("off_se", "on_se")  # a column that may be absent, and empty in some rows
+_OPTIONAL_COLUMNS = (*_OPTIONAL, "time_s")  # that may be absent (a time then in every row)
 _REPEAT = ("repeat", "run", "rep", "trial")
 
 
@@ -148,7 +154,7 @@ def read_levels_table(
         if j is None:
             if field == "vibration_frequency_hz" and frequency_hz is not None:
                 values[field] = np.full(table.n_rows, float(frequency_hz))
-            elif field not in _OPTIONAL:
+            elif field not in _OPTIONAL_COLUMNS:
                 message = (
                     f"no {field.split('_')[0].replace('normal', 'normal load')} column: name "
                     f"one {names[0]!r} with its unit in the header; the columns are {listing}"

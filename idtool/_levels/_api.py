@@ -221,14 +221,15 @@ def _diagnose(fit: LevelsFit) -> tuple[tuple[str, ...], tuple[str, ...]]:
     if loose:
         points = {(n, a) for n, a in zip(t.normal_load_n, t.amplitude_m, strict=True)}
         speeds = np.unique(t.sliding_speed_m_s).size
-        n_coupling = len(model.params) - names.index("mu") - 1
+        coupling_names = {p.name for p in model.spec.coupling.fit_params}
+        n_coupling = len(coupling_names)
         listed = "; ".join(f"{n} {fit.estimates[n].statement}" for n in loose)
         text = (
             f"{CANNOT_PIN} {', '.join(loose)}: {t.operating_points[1].size} "
             f"condition(s), {len(points)} load-amplitude point(s) at {speeds} speed(s), "
             f"for {len(names)} parameters ({listed})"
         )
-        if len(points) <= n_coupling and any(names.index(n) > names.index("mu") for n in loose):
+        if len(points) <= n_coupling and coupling_names & set(loose):
             text += (
                 f"; {len(points)} load-amplitude point(s) cannot pin a {n_coupling}-"
                 f"parameter coupling law ({model.coupling}): add loads or amplitudes, or "

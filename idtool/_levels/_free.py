@@ -12,7 +12,8 @@ velocity ratio, and how FR changes with it depends on Kt (notes §3).
 The law-free model gives each load-amplitude point ``j`` (with its frequency) a slip
 amplitude of its own, ``a_j = g_j alpha_j A_ref`` with ``g_j`` free in the constant
 law's range, and shares the friction law's parameters and mu: it nests every coupling
-law (each is one choice of the ``g_j``). Fitted by the table fit's own stages
+law (each is one choice of the ``g_j``); a table with its rows' times keeps the law's
+horn drift (:data:`idtool._levels._model.HORN_DRIFT`, last). Fitted by the table fit's own stages
 (:func:`idtool._levels._estimate.estimate`, started from the law's optimum, so its
 likelihood is at least the law's), it gives
 
@@ -21,7 +22,8 @@ likelihood is at least the law's), it gives
   ``F = statistic / q`` against Fisher's F with ``(q, r)`` degrees of freedom, ``r`` the
   conditions the free model leaves (conditions - points - the friction law's
   parameters), since the discrepancy sd is estimated from those few (chi-squared with
-  ``q``, on 12 simulated tables that follow the law, rejected 2 at 5%): small ``p`` is a
+  ``q``, on 12 simulated tables that follow the law, rejected 2 at 5%; one less with
+  the horn drift): small ``p`` is a
   table that rejects the law's shape;
 * the friction law's parameters' law-free profile intervals: where the test rejects
   (``p <`` :data:`LEVEL`), :func:`idtool.fit_levels` widens each of those parameters'
@@ -42,7 +44,7 @@ import scipy.stats
 
 from idtool._lawfit._profile import Side
 from idtool._levels._estimate import Optimum, estimate, profile_sides
-from idtool._levels._model import LevelsData, LevelsModel, LevelsSpec, log_off
+from idtool._levels._model import HORN_DRIFT, LevelsData, LevelsModel, LevelsSpec, log_off
 from idtool._model._bench import on_friction_ratio
 from idtool._model._coupling import COUPLINGS, GAIN
 from idtool._model._params import Param
@@ -54,19 +56,24 @@ LEVEL = 0.05  # the test's level: a table that rejects the law's shape at 5%
 
 def _free_log_levels(spec: LevelsSpec, data: LevelsData, point, theta):
     """Log OFF of every row, then log FR, with each condition's slip gain
-    ``theta[k + point]`` (``k``: the friction law's parameters and mu)."""
+    ``theta[k + point]`` (``k``: the friction law's parameters and mu), and each row's
+    reference amplitude drifted by ``theta[-1]`` when the spec has the drift."""
     k = len(spec.law.fit_params) + 1
     vals = {p.name: p.value(theta[i]) for i, p in enumerate(spec.params[:k])}
-    gains = GAIN.value(theta[k:])[point]
+    gains = GAIN.value(theta[k : theta.shape[0] - int(spec.drift)])[point]
     constant = COUPLINGS.get("constant")
 
-    def one(n1, a1, v1, f1, g1):
+    def one(n1, a1, v1, f1, g1, ref):
         law_n = spec.law.at_load(vals, n1)
-        return on_friction_ratio(
-            law_n, constant(gain=g1), n1, a1, v1, f1, data.a_ref, spec.direction
-        )
+        return on_friction_ratio(law_n, constant(gain=g1), n1, a1, v1, f1, ref, spec.direction)
 
-    fr = jax.vmap(one)(data.n, data.alpha, data.v, data.f, gains)[data.gather]
+    d, g = data, data.gather
+    if spec.drift:  # each row at its own reference amplitude (the law's model, too)
+        a_row = d.a_ref * (1.0 + HORN_DRIFT.value(theta[-1]) * d.row_tau)
+        fr = jax.vmap(one)(d.n[g], d.alpha[g], d.v[g], d.f[g], gains[g], a_row)
+    else:
+        a_ref = jnp.full(d.n.shape, d.a_ref)
+        fr = jax.vmap(one)(d.n, d.alpha, d.v, d.f, gains, a_ref)[g]
     return jnp.concatenate([log_off(spec, data, vals), jnp.log(fr)])
 
 
@@ -97,7 +104,8 @@ class FreeAmplitudeModel:
 
     @property
     def params(self) -> tuple[Param, ...]:
-        """The friction law's parameters, mu, then ``slip_gain[j]`` per point."""
+        """The friction law's parameters, mu, ``slip_gain[j]`` per point, then the horn
+        drift if the table has its rows' times."""
         k = len(self.spec.law.fit_params) + 1
         gains = tuple(
             dataclasses.replace(
@@ -107,7 +115,7 @@ class FreeAmplitudeModel:
             )
             for j in range(self.n_points)
         )
-        return (*self.spec.params[:k], *gains)
+        return (*self.spec.params[:k], *gains, *((HORN_DRIFT,) if self.spec.drift else ()))
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -131,7 +139,9 @@ def free_model(model: LevelsModel) -> FreeAmplitudeModel:
         keys.setdefault((float(n), float(a), float(f)), len(keys))
         for n, a, f in zip(np.asarray(d.n), np.asarray(d.alpha), np.asarray(d.f), strict=True)
     ]
-    spec = LevelsSpec(model.spec.law, COUPLINGS.get("constant"), model.spec.direction)
+    spec = LevelsSpec(
+        model.spec.law, COUPLINGS.get("constant"), model.spec.direction, model.spec.drift
+    )
     return FreeAmplitudeModel(model.table, spec, d, jnp.asarray(point), len(keys))
 
 
@@ -208,6 +218,7 @@ def check_coupling(model: LevelsModel, opt: Optimum, seed: int = 0) -> CouplingC
     free = free_model(model)
     dof = free.n_points - len(model.spec.coupling.fit_params)
     residual = int(free.point.size) - free.n_points - len(model.spec.law.fit_params)
+    residual -= int(model.spec.drift)  # the horn drift, fitted in both models
     if dof <= 0 or residual <= 0:
         return None
     # the law's slip gain at each point: the law-free model's start, where its
@@ -225,6 +236,7 @@ def check_coupling(model: LevelsModel, opt: Optimum, seed: int = 0) -> CouplingC
         [
             np.asarray(opt.theta[:k]),
             [GAIN.internal(float(np.clip(g, GAIN.lo, GAIN.hi))) for g in gain],
+            np.asarray(opt.theta[len(model.params) - int(model.spec.drift) :]),
         ]
     )
     fopt = estimate(free, seed=seed, starts=[start])

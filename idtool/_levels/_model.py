@@ -14,6 +14,21 @@ frequency may differ per row). ``alpha_i`` is the row's amplitude over
 :attr:`LevelsTable.reference_amplitude_m`. ``theta`` are the law's parameters, ``mu``
 and the coupling's, on the internal unbounded scale of :class:`idtool.Param`, in that
 order (:func:`idtool._model._benchmodel.shared_params_of` without the bench's own).
+
+A table that records when each row was measured (:attr:`LevelsTable.has_times`) adds
+one bench parameter at the end of ``theta``, :data:`HORN_DRIFT` ``d``: the horn's output
+(the slip amplitude per command) drifts linearly over the campaign, and row ``i`` is
+taken at
+
+    a_i = (1 + d tau_i) a(alpha_i, N_i),   tau_i = (t_i - t_mid) / (t_last - t_first)
+
+(:attr:`LevelsTable.campaign_position`, in [-1/2, 1/2]). Every registered table
+coupling's amplitude is proportional to the reference amplitude, so the drift scales
+that. A worn sonotrode face or a creeping clamp shifts each row's FR by its sensitivity
+to the amplitude; rows measured in a random order then average different drifts at each
+condition, a condition effect that lines up with Kt's weak signature (issue 30's
+"gain-drift" bench: transverse Kt inside its interval on 5 of 8 tables without the
+times). The estimates and every prediction are at the campaign's middle (``tau = 0``).
 """
 
 from __future__ import annotations
@@ -38,6 +53,7 @@ from idtool._model._params import Param
 
 __all__ = [
     "DEFAULT_LAW",
+    "HORN_DRIFT",
     "LevelsData",
     "LevelsModel",
     "LevelsSpec",
@@ -49,6 +65,19 @@ __all__ = [
 
 DEFAULT_LAW = "dahl"  # as idtool.fit's
 
+HORN_DRIFT = Param(
+    "horn_drift",
+    "1",
+    "tanh",
+    -0.9,
+    0.9,
+    start=0.0,
+    description=(
+        "relative change of the horn's output (slip amplitude per command) from the "
+        "campaign's first measurement to its last (module docstring)"
+    ),
+)
+
 
 @dataclasses.dataclass(frozen=True)
 class LevelsSpec:
@@ -58,17 +87,20 @@ class LevelsSpec:
     law: Any
     coupling: Any
     direction: Any
+    drift: bool = False  # the table records its rows' times: HORN_DRIFT is fitted
 
     @property
     def params(self) -> tuple[Param, ...]:
-        return (*self.law.fit_params, MU, *self.coupling.fit_params)
+        drift = (HORN_DRIFT,) if self.drift else ()
+        return (*self.law.fit_params, MU, *self.coupling.fit_params, *drift)
 
 
 class LevelsData(eqx.Module):
     """A table's numbers the programs read, as arguments (not constants compiled in):
     per condition ``n`` [N], ``alpha`` (fraction of ``a_ref``), ``v`` [m/s], ``f`` [Hz];
-    per row ``row_n`` [N], ``row_v`` [m/s] and ``gather`` (its condition);
-    ``a_ref`` [m]; ``coefficient`` 1.0 where the table gives friction coefficients."""
+    per row ``row_n`` [N], ``row_v`` [m/s], ``gather`` (its condition) and ``row_tau``
+    (its place in the campaign, :attr:`LevelsTable.campaign_position`); ``a_ref`` [m];
+    ``coefficient`` 1.0 where the table gives friction coefficients."""
 
     n: Array
     alpha: Array
@@ -77,6 +109,7 @@ class LevelsData(eqx.Module):
     row_n: Array
     row_v: Array
     gather: Array
+    row_tau: Array
     a_ref: Array
     coefficient: Array
 
@@ -87,16 +120,10 @@ def _values(spec: LevelsSpec, theta) -> dict[str, Any]:
 
 def fr_points(spec: LevelsSpec, a_ref, theta, n, alpha, v, f):
     """FR at points ``(n [N], alpha, v [m/s], f [Hz])`` (arrays of one shape)."""
-    vals = _values(spec, theta)
-    cpl = spec.coupling.from_values(vals)
-
-    def one(n1, a1, v1, f1):
-        law_n = spec.law.at_load(vals, n1)
-        return on_friction_ratio(law_n, cpl, n1, a1, v1, f1, a_ref, spec.direction)
-
     shape = jnp.shape(n)
     flat = [jnp.ravel(jnp.asarray(x, float)) for x in (n, alpha, v, f)]
-    return jax.vmap(one)(*flat).reshape(shape)
+    a_refs = jnp.full(flat[0].shape, a_ref, float)
+    return _fr_rows(spec, a_refs, theta, *flat).reshape(shape)
 
 
 def log_off(spec: LevelsSpec, data: LevelsData, vals: dict[str, Any]):
@@ -107,8 +134,27 @@ def log_off(spec: LevelsSpec, data: LevelsData, vals: dict[str, Any]):
 
 def log_levels(spec: LevelsSpec, data: LevelsData, theta):
     """Log OFF of every row, then log FR (2 n,): the module docstring's equations."""
-    fr = fr_points(spec, data.a_ref, theta, data.n, data.alpha, data.v, data.f)[data.gather]
+    if spec.drift:
+        # each row at its own slip amplitude: the drift scales the reference amplitude
+        a_row = data.a_ref * (1.0 + _values(spec, theta)[HORN_DRIFT.name] * data.row_tau)
+        g = data.gather
+        fr = _fr_rows(spec, a_row, theta, data.n[g], data.alpha[g], data.v[g], data.f[g])
+    else:
+        fr = fr_points(spec, data.a_ref, theta, data.n, data.alpha, data.v, data.f)
+        fr = fr[data.gather]
     return jnp.concatenate([log_off(spec, data, _values(spec, theta)), jnp.log(fr)])
+
+
+def _fr_rows(spec: LevelsSpec, a_ref, theta, n, alpha, v, f):
+    """FR at points with a reference amplitude of each their own (arrays of one shape)."""
+    vals = _values(spec, theta)
+    cpl = spec.coupling.from_values(vals)
+
+    def one(a1, n1, al1, v1, f1):
+        law_n = spec.law.at_load(vals, n1)
+        return on_friction_ratio(law_n, cpl, n1, al1, v1, f1, a1, spec.direction)
+
+    return jax.vmap(one)(a_ref, n, alpha, v, f)
 
 
 # compiled once per model and shape, for every table (they were closures over each
@@ -204,8 +250,9 @@ def levels_model(
         row_n=jnp.asarray(table.normal_load_n, float),
         row_v=jnp.asarray(table.sliding_speed_m_s, float),
         gather=jnp.asarray(index),
+        row_tau=jnp.asarray(table.campaign_position, float),
         a_ref=jnp.asarray(table.reference_amplitude_m, float),
         coefficient=jnp.asarray(1.0 if table.friction == "coefficient" else 0.0),
     )
-    spec = LevelsSpec(law_cls, coupling_cls, direction_cls)
+    spec = LevelsSpec(law_cls, coupling_cls, direction_cls, drift=table.has_times)
     return LevelsModel(table=table, spec=spec, data=data)

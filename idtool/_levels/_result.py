@@ -426,6 +426,13 @@ class LevelsFit:
             f"model     law {m.law}, coupling {m.coupling}, direction {m.direction}; "
             f"amplitude fraction = amplitude / {t.reference_amplitude_m * 1e6:g} um",
         ]
+        if m.spec.drift:
+            hours = float(np.ptp(t.time_s)) / 3600.0
+            lines.append(
+                f"drift     the horn's output drifts linearly over the rows' times "
+                f"({hours:.3g} h, horn_drift); every estimate and prediction is at the "
+                "campaign's middle"
+            )
         if self.ranking:
             lines += [
                 "",

@@ -298,6 +298,12 @@ def write_levels_report(fit_folder: str | Path) -> Path:
                     f" (best of {len(fit.ranking)} by BIC; bands over {1 + len(fit.alternates)})"
                     if fit.ranking
                     else ""
+                )
+                + (
+                    "; the horn's output drifting linearly over the rows' times (horn_drift),"
+                    " every estimate and band at the campaign's middle"
+                    if m.spec.drift
+                    else ""
                 ),
             ],
             ["posterior", posterior],

@@ -20,7 +20,8 @@ scatter per row: the error structure the table fit assumes
   departure: a clamped webbing damps the horn), a shape the power limit has not;
 * ``"gain-drift"``: the rows measured in a random order while the horn's coupling falls
   linearly by 15% over the campaign (wear of the sonotrode face): the rows' FR drift
-  with the order, which no table column records.
+  with the order, which no table column records unless ``record_times`` writes each
+  row's measurement time (the fit then fits the drift, :mod:`idtool._levels._model`).
 
 :func:`table_friction_ratio` is the truth at any condition (for ``"gain-drift"`` at the
 campaign's middle), for checking a prediction's band.
@@ -50,6 +51,7 @@ TABLE_TRUTH: dict[str, float] = {
 TABLE_DEPARTURES = ("heavy-tails", "sublinear-coupling", "load-coupling", "gain-drift")
 SUBLINEAR_EXPONENT = 0.6  # "sublinear-coupling": contact amplitude ~ command ** 0.6
 GAIN_DRIFT = 0.15  # "gain-drift": the coupling's fall over the campaign, relative
+ROW_INTERVAL_S = 300.0  # record_times: one row measured every 5 minutes
 T_DOF = 3  # "heavy-tails": Student's t degrees of freedom
 LOAD_SCALE_N = 60.0  # "load-coupling": the gain's e-folding load [N]
 
@@ -111,6 +113,7 @@ def simulate_table(
     frequency_hz: float = 22e3,
     max_amplitude_m: float = 6e-6,
     name: str | None = None,
+    record_times: bool = False,
 ) -> LevelsTable:
     """A simulated table (module docstring), friction as forces [N].
 
@@ -130,6 +133,10 @@ def simulate_table(
         frequency_hz: the vibration's frequency [Hz].
         max_amplitude_m: the rig's amplitude at full command [m].
         name: the table's (default ``simulated-<seed>``).
+        record_times: write each row's measurement time (``time_s``, one row every
+            :data:`ROW_INTERVAL_S` in a random order: for ``"gain-drift"`` the order the
+            gain falls along; otherwise drawn from a stream of its own, so that the
+            table's numbers are those without the times).
     """
     if departure is not None and departure not in TABLE_DEPARTURES:
         raise ValueError(f"departure {departure!r}: None or one of {TABLE_DEPARTURES}")
@@ -146,6 +153,8 @@ def simulate_table(
             max_amplitude_m=max_amplitude_m,
         )  # fmt: skip
 
+    # the place of each row in the measuring order (the rows' order, unless drawn)
+    order = np.random.default_rng([seed, 1]).permutation(len(rows))
     if departure == "gain-drift":
         # the order the rows were measured in; the gain falls linearly along it
         order = rng.permutation(len(rows))
@@ -164,6 +173,8 @@ def simulate_table(
     off = t["mu"] * rows[:, 0] * np.exp(noise_mu)
     on = off * fr * np.exp(d + noise_fr)
     nan = np.full(len(rows), np.nan)
+    time_s = np.empty(len(rows))
+    time_s[order] = ROW_INTERVAL_S * np.arange(len(rows))
     return LevelsTable(
         name=name or f"simulated-{seed}",
         material="simulated",
@@ -178,5 +189,6 @@ def simulate_table(
         off_se=nan,
         on_se=nan,
         repeat=tuple(str(i % repeats) for i in range(len(rows))),
+        time_s=time_s if record_times else nan,
         max_amplitude_m=max_amplitude_m,
     )
