@@ -48,6 +48,7 @@ def with_rows(table: idtool.LevelsTable, rows, seed: int) -> idtool.LevelsTable:
         "normal_load_n": new["n"], "amplitude_m": new["a"], "sliding_speed_m_s": new["v"],
         "off": new["off"], "on": new["on"], "amplitude_fraction": [np.nan] * k,
         "vibration_frequency_hz": [22e3] * k, "off_se": [np.nan] * k, "on_se": [np.nan] * k,
+        "time_s": [np.nan] * k,  # the table records no times
     }  # fmt: skip
     fields = {
         f.name: np.concatenate([getattr(table, f.name), np.asarray(add[f.name], float)])
