@@ -193,7 +193,7 @@ FILE_SECONDS: dict[str, float] = {
     "tests/test_sample.py": 192,
     "tests/test_levels_sample.py": 190,
     "tests/test_api.py": 183,
-    "tests/test_variability.py": 180,
+    "tests/test_variability.py": 240,
     "tests/test_fit.py": 151,
     "tests/test_artefact.py": 140,
     "tests/test_compare.py": 139,
