@@ -24,8 +24,10 @@ lint: $(STAMP)
 	$(BIN)/mypy
 	$(BIN)/lint-imports --no-cache
 
+# -m "not study": the tests marked study (recovery, coverage and convergence studies on
+# simulated benches, pyproject.toml's markers) run in make study instead
 test: lint
-	MPLBACKEND=Agg $(BIN)/python -m pytest -n 2 --dist loadfile --durations=30
+	MPLBACKEND=Agg $(BIN)/python -m pytest -n 2 --dist loadfile --durations=30 -m "not study"
 
 # The site from docs/ and the docstrings (mkdocs.yml); --strict: any warning (a broken
 # link, a docstring mkdocstrings cannot parse, an example importing idtool._*) fails it.
@@ -46,9 +48,11 @@ bench: $(STAMP)
 # fit, the likelihood or the sampler, and quote its table (benchmarks/study_departures.py).
 # Then the coverage test on all 3 seeds per kind, with the rates that `make test` (one
 # seed per kind) leaves to it (tests/test_coverage.py; about 7 min on one core).
+# Last, the tests marked study, which make test leaves out (about 8 min on 2 cores).
 study: $(STAMP)
 	$(BIN)/python benchmarks/study_departures.py --seeds 3
 	IDTOOL_COVERAGE_SEEDS=3 MPLBACKEND=Agg $(BIN)/python -m pytest tests/test_coverage.py -s
+	MPLBACKEND=Agg $(BIN)/python -m pytest -n 2 --dist loadfile --durations=30 -m study
 
 clean-venv:
 	rm -rf $(VENV)

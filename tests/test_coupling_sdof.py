@@ -257,6 +257,7 @@ def test_the_rig_transducer_fixes_the_detuning_and_the_damping():
     assert other.fixed == {}
 
 
+@pytest.mark.study
 @pytest.mark.slow
 def test_the_fit_recovers_its_own_truth(tmp_path):
     """``--coupling sdof`` on sdof-simulated data (the paper's matrix): mu, Fe_max and

@@ -117,6 +117,7 @@ def two_repeats(table: idtool.LevelsTable) -> idtool.LevelsTable:
     return idtool.LevelsTable(**fields)
 
 
+@pytest.mark.study
 def test_default_sample_converges_and_covers_the_truth_of_a_simulated_table():
     """The default run (until converged) on a simulated table: the truth of Kt and mu
     inside the posterior's 95% intervals, the bands from the draws."""

@@ -76,6 +76,7 @@ def coverage_runs():
     return runs
 
 
+@pytest.mark.study
 @pytest.mark.slow
 def test_ar1_intervals_cover_the_truth_at_about_the_nominal_rate(coverage_runs):
     """6 seeds x 8 quantities (6 shared parameters, FR at the held-out load for two
@@ -100,6 +101,7 @@ def z_scores(post) -> np.ndarray:
     )
 
 
+@pytest.mark.study
 @pytest.mark.slow
 def test_independent_noise_gives_falsely_tight_posteriors(coverage_runs):
     """The evidence for the AR(1) default, on the same data and fits: the
@@ -124,6 +126,7 @@ def test_independent_noise_gives_falsely_tight_posteriors(coverage_runs):
     assert np.mean(hit_iid) <= np.mean(hit_ar1)
 
 
+@pytest.mark.study
 @pytest.mark.slow
 def test_held_out_load_prediction_is_within_0_03_and_inside_the_band(coverage_runs):
     """Fitted on 270 and 670 N only: FR at 450 N against the simulator's truth."""
@@ -154,6 +157,7 @@ def test_walkers_leave_a_local_optimum_of_the_fit(monkeypatch):
     assert np.median(post.draws()["Kt"]) == pytest.approx(truth()["Kt"], rel=0.1)
 
 
+@pytest.mark.study
 def test_posterior_width_matches_the_fits_marginal_covariance(coverage_runs):
     """Integrating the nuisances out gives the fit's marginal widths (Laplace), where
     holding them fixed would give far narrower ones (conditioning_shrinkage < 0.8)."""
