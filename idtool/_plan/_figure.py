@@ -83,7 +83,9 @@ def plot_plan(plan, band_map: np.ndarray, traces: np.ndarray, path: Path) -> Pat
     else:
         right.set_title(f"target {plan.target:g}: met before any pull", fontsize=9)
     right.set_xlabel("pulls added [count]")
-    right.set_ylabel(f"expected {plan.unit} [{_UNITS[plan.goal]}]")
+    # the laws goal's unit is an expectation already ("expected weight of ...")
+    what = plan.unit if plan.unit.startswith("expected") else f"expected {plan.unit}"
+    right.set_ylabel(f"{what} [{_UNITS[plan.goal]}]")
     right.legend(fontsize=9)
     fig.suptitle(f"idtool plan: goal {plan.goal}")
     save_figure(fig, path)
