@@ -166,6 +166,11 @@ def test_auto_picks_the_simulated_direction(auto_fits, direction):
     assert set(table) == set(DIRECTIONS)
     assert next(iter(table)) == direction  # best first
     assert table[direction]["bic_weight"] > 0.99
+    # weighed by the levels model (idtool/_fit/_choice_levels.py); an option whose levels
+    # model cannot be estimated is listed with weight 0 and its trace-level criteria
+    assert table[direction]["criterion"] == "levels"
+    for entry in table.values():
+        assert entry["criterion"] == "levels" or entry["bic_weight"] == 0.0
     assert fit.to_json()["direction"]["name"] == direction
     assert "[[Directions of vibration]]" in fit.report()
     assert not [w for w in fit.warnings if w.code == "directions"]

@@ -27,7 +27,10 @@ gives, so a wrong pair can stand in for the right one), and one mechanism ranks 
 choices (:func:`choice_weights`: each option's best candidate, its BIC and AIC weights;
 :func:`comparable_warning` when others hold more than 5% of the BIC weight). The models
 predictions average over are then each (coupling law, direction) pair's best
-(:func:`model_label`).
+(:func:`model_label`). With the levels model on, the options of these two choices are
+weighed by its likelihood instead of the traces' (:mod:`idtool._fit._choice_levels`: the
+traces' BIC reads pull-to-pull scatter as signal); the actuator, offset and level models
+within an option stay the traces' BIC's.
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ from idtool._data._design import speed_resolved_pairs
 from idtool._data._mains import resolve_mains
 from idtool._diagnostic import Diagnostic
 from idtool._errors import IdtoolError
+from idtool._fit._choice_levels import LevelsCriterion, levels_criteria, option_bests
 from idtool._fit._detuning import (
     DETUNING,
     detuned_fit,
@@ -106,6 +110,9 @@ class FitRun:
     # :meth:`label` (a coupling law's name unless directions were compared; with the
     # levels model when the chosen fit has it): predictions average over them
     alternates: dict[str, FitResult] = dataclasses.field(default_factory=dict)
+    # the options' levels-model criteria by candidate key, which weigh the coupling laws
+    # and directions when the levels model is on (:mod:`idtool._fit._choice_levels`)
+    criteria: dict[str, LevelsCriterion] = dataclasses.field(default_factory=dict)
 
     @property
     def ranking(self) -> list[tuple[str, FitResult]]:
@@ -114,13 +121,13 @@ class FitRun:
     @property
     def coupling_weights(self) -> dict[str, ChoiceWeight]:
         """Each fitted coupling law's criteria and weights (:func:`coupling_weights`)."""
-        return coupling_weights(self.candidates)
+        return coupling_weights(self.candidates, self.criteria)
 
     @property
     def direction_weights(self) -> dict[str, ChoiceWeight]:
         """Each fitted direction of vibration's criteria and weights
         (:func:`direction_weights`; one entry unless ``direction="auto"``)."""
-        return direction_weights(self.candidates)
+        return direction_weights(self.candidates, self.criteria)
 
     @property
     def compared(self) -> tuple[str, ...]:
@@ -136,7 +143,7 @@ class FitRun:
     def model_weights(self) -> dict[str, ChoiceWeight]:
         """Each model predictions may average over, by :meth:`label`: the best candidate
         of each coupling law, or of each (coupling law, direction) pair fitted."""
-        return choice_weights(self.candidates, lambda f: self.label(f.model))
+        return choice_weights(self.candidates, lambda f: self.label(f.model), self.criteria)
 
 
 # A coupling law below this BIC weight adds nothing a prediction can show (fewer than 2
@@ -197,6 +204,11 @@ class ChoiceWeight:
     aic: float
     bic_weight: float
     aic_weight: float
+    # what a trace fit's criteria are computed from: "levels" (the levels model's
+    # likelihood, the options' when the levels model is on,
+    # :mod:`idtool._fit._choice_levels`) or "traces" (the trace-level likelihood); None
+    # where there is one likelihood only (a friction table's models)
+    criterion: str | None = None
 
     @property
     def law(self) -> str:
@@ -206,6 +218,8 @@ class ChoiceWeight:
     def to_dict(self, field: str = "law") -> dict[str, float | str]:
         """The record ``fit.json`` keeps, the option's name under ``field``."""
         out = dataclasses.asdict(self)
+        if out["criterion"] is None:
+            del out["criterion"]
         return {field: out.pop("name"), **out}
 
 
@@ -238,45 +252,71 @@ def model_label(model: BenchModel, compared: Sequence[str] = ()) -> str:
 
 
 def choice_weights(
-    candidates: Mapping[str, FitResult], of: Callable[[FitResult], str]
+    candidates: Mapping[str, FitResult],
+    of: Callable[[FitResult], str],
+    criteria: Mapping[str, LevelsCriterion] | None = None,
 ) -> dict[str, ChoiceWeight]:
     """Per option ``of`` a candidate (best first): :class:`ChoiceWeight` from each
-    option's best candidate. The one mechanism of every model choice BIC makes."""
-    best: dict[str, tuple[str, FitResult]] = {}
-    for key, fit in candidates.items():
-        law = of(fit)
-        if law not in best or fit.bic < best[law][1].bic:
-            best[law] = (key, fit)
+    option's best candidate (by the trace-level BIC). The one mechanism of every model
+    choice BIC makes. With ``criteria`` (by candidate key, :func:`levels_criteria`) the
+    options are weighed by the levels model's BIC and AIC; an option whose best candidate
+    has none (its levels model could not be estimated, and the trace-level BIC rules it
+    out) follows them with weight 0 and its trace-level criteria."""
+    best = {o: (key, candidates[key]) for o, key in option_bests(candidates, of).items()}
+    criterion = "traces"
+    unscored: dict[str, ChoiceWeight] = {}
+    if criteria:
+        for o, (key, fit) in best.items():
+            if key not in criteria:
+                unscored[o] = ChoiceWeight(o, key, fit.bic, fit.aic, 0.0, 0.0, "traces")
+        best = {o: kf for o, kf in best.items() if kf[0] in criteria}
+        criterion = "levels"
+
+    def of_best(option: str) -> tuple[float, float]:
+        key, fit = best[option]
+        c = criteria[key] if criteria else fit
+        return c.bic, c.aic
 
     def weights(values: np.ndarray) -> np.ndarray:
         w = np.exp(-0.5 * (values - values.min()))
         return w / w.sum()
 
-    laws = sorted(best, key=lambda n: best[n][1].bic)
-    bic = np.array([best[n][1].bic for n in laws])
-    aic = np.array([best[n][1].aic for n in laws])
+    laws = sorted(best, key=lambda n: of_best(n)[0])
+    bic = np.array([of_best(n)[0] for n in laws])
+    aic = np.array([of_best(n)[1] for n in laws])
     wb, wa = weights(bic), weights(aic)
-    return {
-        n: ChoiceWeight(n, best[n][0], float(bic[i]), float(aic[i]), float(wb[i]), float(wa[i]))
+    scored = {
+        n: ChoiceWeight(
+            n, best[n][0], float(bic[i]), float(aic[i]), float(wb[i]), float(wa[i]), criterion
+        )
         for i, n in enumerate(laws)
     }
+    return scored | dict(sorted(unscored.items(), key=lambda kv: kv[1].bic))
 
 
-def choice_table(candidates: Mapping[str, FitResult], choice: str) -> dict[str, ChoiceWeight]:
+def choice_table(
+    candidates: Mapping[str, FitResult],
+    choice: str,
+    criteria: Mapping[str, LevelsCriterion] | None = None,
+) -> dict[str, ChoiceWeight]:
     """Per option of the model choice ``choice`` (a name of :data:`CHOICES`), best
-    first, from each option's best candidate."""
+    first, from each option's best candidate (:func:`choice_weights`)."""
     option = CHOICES[choice]
-    return choice_weights(candidates, lambda f: option(f.model))
+    return choice_weights(candidates, lambda f: option(f.model), criteria)
 
 
-def coupling_weights(candidates: Mapping[str, FitResult]) -> dict[str, ChoiceWeight]:
+def coupling_weights(
+    candidates: Mapping[str, FitResult], criteria: Mapping[str, LevelsCriterion] | None = None
+) -> dict[str, ChoiceWeight]:
     """Per coupling law (best first), from each law's best candidate."""
-    return choice_table(candidates, "coupling")
+    return choice_table(candidates, "coupling", criteria)
 
 
-def direction_weights(candidates: Mapping[str, FitResult]) -> dict[str, ChoiceWeight]:
+def direction_weights(
+    candidates: Mapping[str, FitResult], criteria: Mapping[str, LevelsCriterion] | None = None
+) -> dict[str, ChoiceWeight]:
     """Per direction of vibration (best first), from each direction's best candidate."""
-    return choice_table(candidates, "direction")
+    return choice_table(candidates, "direction", criteria)
 
 
 # What the warning of options that fit comparably says, per choice: the options' plural,
@@ -489,6 +529,18 @@ def fit_dataset(
                     candidates[key] = fit_one(lw, cp, ac, offsets[0], plain, lvl, dr)
             ranked = sorted(candidates.items(), key=lambda kv: kv[1].bic)
             best_key, best = ranked[0]
+        # the coupling laws (and directions) weighed by the levels model, which carries
+        # the pull-to-pull scatter the trace-level BIC reads as signal
+        compared = compared_choices(candidates)
+        criteria: dict[str, LevelsCriterion] = {}
+        if variability and compared:
+            say("weighing the " + " and ".join(compared) + " options by the levels model")
+            criteria = levels_criteria(
+                candidates, lambda f: model_label(f.model, compared), best_key, MIN_LAW_WEIGHT
+            )
+            if criteria:
+                best_key = min(criteria, key=lambda key: criteria[key].bic)
+                best = candidates[best_key]
         say(f"checking the intervals of {best_key}")
         best = candidates[best_key] = check_intervals(best)
         profiles = {}
@@ -521,8 +573,7 @@ def fit_dataset(
         best = candidates[best_key] = with_plateau_drift(best)
         # the models predictions average over: each coupling law's best, or each
         # (coupling law, direction) pair's when the directions were compared
-        compared = compared_choices(candidates)
-        weights = choice_weights(candidates, lambda f: model_label(f.model, compared))
+        weights = choice_weights(candidates, lambda f: model_label(f.model, compared), criteria)
         chosen = weights[model_label(best.model, compared)]
         alternates = {}
         for w in weights.values():
@@ -531,7 +582,7 @@ def fit_dataset(
                 fit = candidates[w.key]
                 alternates[w.name] = with_variability(fit) if variability else fit
         for choice, option in CHOICES.items():  # the data do not single out the option
-            table = choice_table(candidates, choice)
+            table = choice_table(candidates, choice, criteria)
             warning = comparable_warning(choice, table, option(best.model))
             if warning is not None:
                 run_warnings.append(warning)
@@ -542,8 +593,16 @@ def fit_dataset(
             best = candidates[best_key] = dataclasses.replace(
                 best, warnings=[*best.warnings, *run_warnings]
             )
+        scored = [w for w in weights.values() if w.criterion == "levels"]
         if len(ranked) == 1:
             reason = f"{best_key} as requested"
+        elif len(scored) > 1:
+            top, runner_up = scored[:2]
+            reason = (
+                f"{best_key}: the levels model's BIC (pull-to-pull scatter and discrepancy "
+                f"in its likelihood) lower by {runner_up.bic - top.bic:.1f} and AIC by "
+                f"{runner_up.aic - top.aic:.1f} than {runner_up.key}'s"
+            )
         else:
             second_key, second = ranked[1]
             reason = (
@@ -562,7 +621,7 @@ def fit_dataset(
                 "law were tried"
             )
         if auto_direction and len(directions) > 1:
-            table = direction_weights(candidates)
+            table = direction_weights(candidates, criteria)
             reason += "; directions of vibration by BIC weight: " + ", ".join(
                 f"{w.name} {w.bic_weight:.3f}" for w in table.values()
             )
@@ -574,7 +633,7 @@ def fit_dataset(
         if profile:
             for name in best.model.physical_names:
                 profiles[name] = profile_parameter(best, name)
-        return FitRun(data, best, candidates, reason, seed, profiles, alternates)
+        return FitRun(data, best, candidates, reason, seed, profiles, alternates, criteria)
 
 
 def kt_through_coupling(law: str, pairs: Sequence[tuple[float, float]] = ()) -> str:

@@ -248,11 +248,17 @@ def _line_search(model, z, state, y, rows, form, theta, step, r, at_theta):
     return theta, np.zeros_like(step), at_theta
 
 
-def estimate_variability(model: BenchModel, z: np.ndarray, state) -> Variability:
+def estimate_variability(
+    model: BenchModel, z: np.ndarray, state, free: FreeLevels | None = None
+) -> Variability:
     """Stages 1 and 2 (module docstring) from a converged fit's ``z`` and noise
-    ``state`` (its noise model's correlation state; AR(1): ``[phi]``)."""
+    ``state`` (its noise model's correlation state; AR(1): ``[phi]``). ``free``: the
+    traces' free levels to fit (another fit's of the same traces, so that models are
+    compared on the same data, :mod:`idtool._fit._choice_levels`); by default this
+    fit's own."""
     k = model.n_physical
-    free = free_levels(model, np.asarray(z), state)
+    if free is None:
+        free = free_levels(model, np.asarray(z), state)
     design = level_design(model, free.measured)
     if not design.active[2]:
         raise NoMeasuredLevels("no trace's ON window is long enough to measure its ON level")

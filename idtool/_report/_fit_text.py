@@ -216,15 +216,27 @@ def _choice_lines(title: str, what: str, weights: dict[str, ChoiceWeight]) -> li
         return []
     width = max(len(n) for n in weights)
     best = next(iter(weights.values())).bic
+    basis = (
+        "; the levels model's criteria: pull-to-pull scatter and discrepancy in its "
+        "likelihood, the same free levels for every option"
+        if next(iter(weights.values())).criterion == "levels"
+        else ""
+    )
     lines = [
         f"[[{title}]]  (each {what}'s best model; weights exp(-delta/2), normalised: "
-        f"BIC's ~ the {what}'s posterior probability, AIC's its predictive standing)"
+        f"BIC's ~ the {what}'s posterior probability, AIC's its predictive standing{basis})"
     ]
+    first = next(iter(weights.values())).criterion
     for w in weights.values():
         flag = "  comparable" if w.bic_weight > 0.05 and w.bic > best else ""
+        if w.criterion != first:  # its levels model could not be estimated
+            flag += "  (levels model not estimable; ruled out by the traces)"
+            delta = "      -"
+        else:
+            delta = f"{w.bic - best:7.1f}"
         lines.append(
             f"    {w.name:{width}s}  BIC weight {w.bic_weight:6.3f}  AIC weight "
-            f"{w.aic_weight:6.3f}  dBIC {w.bic - best:7.1f}  ({w.key}){flag}"
+            f"{w.aic_weight:6.3f}  dBIC {delta}  ({w.key}){flag}"
         )
     return lines
 

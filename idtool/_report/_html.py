@@ -216,21 +216,33 @@ def _choice_table(title: str, what: str, entries: Mapping[str, Mapping[str, Any]
     fit comparably (BIC weight above 0.05 beside the chosen) flagged; nothing for one."""
     if len(entries) < 2:
         return ""
-    rows, best = [], min(float(e["bic"]) for e in entries.values())
+    first = next(iter(entries.values())).get("criterion", "traces")
+    rows = []
+    best = min(float(e["bic"]) for e in entries.values() if e.get("criterion", "traces") == first)
     for name, e in entries.items():
         close = float(e["bic_weight"]) > 0.05 and float(e["bic"]) > best
+        weighed = e.get("criterion", "traces") == first
         rows.append(
             [
                 name,
-                f"{float(e['bic']) - best:.1f}",
+                f"{float(e['bic']) - best:.1f}" if weighed else "levels model not estimable",
                 f"{float(e['bic_weight']):.3f}",
                 f"{float(e['aic_weight']):.3f}",
                 str(e["key"]),
                 "fits comparably" if close else ("chosen" if float(e["bic"]) == best else ""),
             ]
         )
-    return f"<h3>{html.escape(title)}</h3>" + table(
-        [what, "delta BIC", "BIC weight", "AIC weight", "best model", ""], rows
+    levels = first == "levels"
+    basis = (
+        "<p>Weighed by the levels model's likelihood (pull-to-pull scatter and "
+        "discrepancy in it), on the same free levels for every option.</p>"
+        if levels
+        else ""
+    )
+    return (
+        f"<h3>{html.escape(title)}</h3>"
+        + basis
+        + table([what, "delta BIC", "BIC weight", "AIC weight", "best model", ""], rows)
     )
 
 
@@ -456,6 +468,8 @@ def write_report(
             f"<p>{html.escape(summary.choice)}</p>"
             + _choice_table("Coupling laws", "law", fit.coupling_laws)
             + _choice_table("Directions of vibration", "direction", fit.directions)
+            + "<h3>Every candidate</h3><p>By the traces' likelihood, which chooses the "
+            "actuator, offset and level models within each option.</p>"
             + table(
                 ["model", "AIC", "BIC", "log L", "parameters"],
                 [
