@@ -8,7 +8,8 @@ Draws.components`), with the levels model's pull-to-pull scatter sds of the same
 the coupling from the draw, the rig from the dataset, the load cell, actuator, horn
 switching and timing from a base simulator document (default the example's,
 ``idtool/data/example_params.json``), the scatter sds as the simulator's
-``scatter``; then a departure of :mod:`idtool._simulate._departures` on top.
+``scatter``; then a departure of :mod:`idtool._simulate._departures` on top (its
+scatter a floor under the truth's, :func:`truth_params`).
 
 The design is the fit's traces (load [N], amplitude, speed [m/s], ON duration [s]) plus
 the plan's pulls; the targets, where the FR band is scored, the plan's operating points
@@ -95,7 +96,9 @@ def truth_params(
     """The simulator's parameter document of ``truth`` (module docstring) on ``base``
     (a simulator document: load cell, actuator, switching, timing), with the dataset's
     ``rig`` and the ``departure`` switched on (``"clean"``: none, the fit's model with
-    its scatter).
+    its scatter). The truth's drawn scatter sds are the simulator's; a departure with
+    pull-to-pull scatter (``"scatter"``, ``"all"``) raises each to at least the
+    departure's (:data:`idtool._simulate._departures.SCATTER`), never lowers it.
 
     Raises:
         IdtoolError: a coupling law the simulator cannot set from its fit parameters.
@@ -124,12 +127,19 @@ def truth_params(
     for name, value in values.items():
         contact[TRUTH_NAMES.get(name, name)] = value
     p["contact"], p["coupling"] = contact, coupling
-    scatter = {SCATTER_FIELDS[k]: v for k, v in truth.sds.items() if v > 0.0}
+    p.pop("scatter", None)
+    with_departure(p, departure)
+    # The truth's own scatter, drawn with its parameters; a departure's scatter is a
+    # floor under it, not a replacement: a truth that scatters 4.8% (the posterior's draw)
+    # simulated at the preset 3% made the study's bands 30% narrower than the plan that
+    # expected the posterior's scatter (issue 29); a fit that saw no scatter still meets
+    # the departure's.
+    floor = p.pop("scatter", {})
+    drawn = {SCATTER_FIELDS[k]: float(v) for k, v in truth.sds.items() if k in SCATTER_FIELDS}
+    scatter = {f: max(drawn.get(f, 0.0), floor.get(f, 0.0)) for f in (*drawn, *floor)}
+    scatter = {f: v for f, v in scatter.items() if v > 0.0}
     if scatter:
         p["scatter"] = scatter
-    else:
-        p.pop("scatter", None)
-    with_departure(p, departure)
     p["name"] = f"study-{departure}"
     return p
 
