@@ -43,7 +43,7 @@ CODES = {
     "singular": "a near-singular direction in parameter space",
     "single_load": "one normal load: the coupling's shape cannot be told apart",
     "lm_not_converged": "Levenberg-Marquardt stopped before its tolerance",
-    "profile_interval": "the Gauss-Newton interval is too narrow; widened by the profile's",
+    "profile_interval": "the Gauss-Newton interval is far off; the profile likelihood's reported",
     "misfit_levels": "the model misses the traces' own levels beyond their noise",
     "misfit_operating_points": "the model misses the operating points (discrepancy sd)",
     "levels_not_estimated": "scatter and discrepancy could not be estimated",

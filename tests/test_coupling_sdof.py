@@ -314,13 +314,16 @@ def test_the_fit_recovers_its_own_truth(tmp_path):
 
 @pytest.mark.slow
 def test_a_detuned_horn_is_found_and_its_detuning_identified(tmp_path):
-    """Traces of a horn driven 45 degrees off resonance (D = R), no rig.transducer. Held
-    at D = 0 the fit runs to the constant law's limit (R at its bound, where D no longer
-    matters); the detuning's profile, started also where the friction loads the horn,
-    finds the basin (best grid point 3e8 N/m against the true 2.9e8, resonance worse by
-    ~390 in -2 log L), and the fit with D estimated from there replaces it on BIC: D and
-    R inside their 95% intervals. (Kt is not: 5.4e8 [3.5e8, 8.3e8] against 1e9, with Kt,
-    R and D correlated at 0.93-0.99 on two amplitudes; not asserted.)"""
+    """Traces of a horn driven 45 degrees off resonance (D = R), no rig.transducer, at
+    three amplitudes (0.3, 0.6, 1.0; ON 1 and 2.5 s: 18 traces). The detuning's profile,
+    started also where the friction loads the horn, finds the basin (best grid point
+    3e8 N/m against the true 2.9e8; resonance worse by 52 in -2 log L, 49 in BIC), and
+    the fit with D estimated from there replaces the resonant one: D, R and Kt inside
+    their 95% intervals (2.88e8 [2.75e8, 3.01e8], 3.8e8 [2.8e8, 5.2e8], 9.9e8 [9.0e8,
+    1.09e9]). On the example's two amplitudes the resonant fit, once its multi-start
+    finds its best basin (Kt at its bound, R 8e8 N/m), is within 1.3 of the detuned
+    one, and the profile's interval [-3.0e8, 3.0e8] N/m holds both D = 0 and the truth:
+    two amplitudes do not tell detuning from loss there."""
     p = json.loads(idtool.example_params_path().read_text())
     p["coupling"] = {
         "law": "sdof",
@@ -328,19 +331,22 @@ def test_a_detuned_horn_is_found_and_its_detuning_identified(tmp_path):
         "loss_stiffness_n_m": LOSS_N_M,
         "detuning_n_m": LOSS_N_M,
     }
+    p["experiments"]["amplitude_fractions"] = [0.3, 0.6, 1.0]
+    p["experiments"]["on_durations_s"] = [1.0, 2.5]
     dataset, _ = idtool.simulate_bench(idtool.BenchParams.from_dict(p), seed=1)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         fit = idtool.fit(dataset, coupling="sdof", actuator="slope", offset="constant")
     e = fit.estimates
     assert not e["detuning_n_m"].fixed
-    for name in ("detuning_n_m", "loss_stiffness_n_m"):
+    for name, truth in (("detuning_n_m", LOSS_N_M), ("loss_stiffness_n_m", LOSS_N_M), ("Kt", 1e9)):
         lo, hi = e[name].ci95
-        assert lo <= LOSS_N_M <= hi, (name, e[name])
+        assert lo <= truth <= hi, (name, e[name])
     (note,) = [n for n in fit.notes if "detuning" in n]
     assert "identified from the traces" in note and "best grid point 3e+08 N/m" in note
+    # resonance excluded by far more than D's price in BIC (3.3 here: 52.3 against 49.0)
     rise = float(note.split("worse by ")[1].split(" ")[0])
-    assert rise > 100.0
+    assert rise > 20.0
     assert not [w for w in fit.warnings if "argue against" in w]
     doc = json.loads(fit.save(tmp_path / "fit", plots=False).joinpath("fit.json").read_text())
     assert doc["parameters"]["detuning_n_m"].get("fixed") is not True

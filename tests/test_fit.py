@@ -57,7 +57,7 @@ def test_example_dataset_recovers_its_truth(example_run):
     assert_recovered(example_run, truth_of(example_params()))
     for w in example_run.chosen.warnings:  # correlations may be flagged; nothing worse
         assert "bound" not in w and "cannot inform" not in w and "stopped" not in w, w
-        assert "too narrow" not in w, w
+        assert getattr(w, "code", "") != "profile_interval", w
 
 
 def test_example_fit_friction_ratios_match_the_simulator(example_run):
@@ -177,6 +177,47 @@ def test_a_spurious_multistart_basin_does_not_win():
         run = fit_dataset(dataset, seed=0)
         assert len(run.chosen.optima) >= 2
         assert_recovered(run, {k: v for k, v in small_truth().items() if k in PHYSICAL})
+
+
+def test_the_multistart_finds_the_basin_where_its_starts_crawl():
+    """Truth 2 of the laws study (tests/data/laws_study_crawling_starts.json: the paper's
+    24 pulls plus 10 planned at 10-20% amplitude, exponential coupling, 3.9% pull-to-pull
+    scatter), simulated with seed 1002. From 8 unscreened starts every run was still
+    crawling after its 20 steps, and the lowest of them led to Kt at its bound (1e13 N/m,
+    2.2e4 x the truth; log-likelihood -4412 against -2833), as on 3 of the seeds
+    1000-1005; the starts screened by their loss at the start reach the optimum that the
+    truth's own start reaches (or a better one) on all 6."""
+    import warnings
+    from pathlib import Path
+
+    from idtool._model._settings import ParameterSetting
+    from idtool._simulate._params import BenchParams
+    from idtool._simulate._simulate import simulate_bench
+    from idtool._study._truths import Truth, design_points, truth_params
+
+    task = json.loads(
+        (Path(__file__).parent / "data" / "laws_study_crawling_starts.json").read_text()
+    )
+    truth = Truth.from_dict(task["truth"])
+    doc = truth_params(truth, task["base"], task["rig"], task["friction_law"], task["departure"])
+    dataset, _ = simulate_bench(
+        BenchParams.from_dict(doc, "the laws study's truth 2"),
+        int(task["seed"]),
+        design_points(task["points"]),
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = fit_dataset(dataset, seed=0, coupling=truth.law, variability=False)
+        at_truth = tuple(ParameterSetting(n, nominal=float(v)) for n, v in truth.values.items())
+        reference = fit_dataset(
+            dataset, seed=0, coupling=truth.law, variability=False, settings=at_truth
+        )
+    fit = run.chosen
+    # at least the likelihood of the optimum the truth's own start reaches (both -2833.4
+    # here; the unscreened multi-start fell 1,578 short)
+    assert fit.loglik >= reference.chosen.loglik - 0.5
+    assert not with_code(fit.warnings, "bound")
+    assert 0.5 < fit.estimates["Kt"].estimate / truth.values["Kt"] < 2.0
 
 
 def test_single_load_warns_that_the_coupling_cannot_be_told_apart():

@@ -6,9 +6,12 @@ few loads) the loss can be nearly flat over a range that ``J^T J`` at the optimu
 not see: the second-order terms of the residuals cancel its curvature. The reported
 interval is then far too narrow. For every physical parameter this module refits all
 the others at both ends of its 95% interval; the rise of ``-2 log L`` there should be
-3.84. Where it stays below 1 on a side, that side's end is replaced by the profile
-likelihood's, found by walking outward in doubling steps until the rise reaches 3.84
-or the parameter's bound, and a warning says so.
+3.84. Where it stays below 1 on a side (far too narrow) or exceeds 3.84^2 (far too
+wide: on a one-sided parameter whose Gauss-Newton interval runs off the range's top, its
+other end can lie decades beyond the data's), that end is replaced by the profile
+likelihood's, found by walking outward in doubling steps until the rise
+reaches 3.84 or the parameter's bound (and an end at the bound checked the same way),
+and a warning says so.
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ import numpy as np
 
 from idtool._diagnostic import Diagnostic
 from idtool._fit._program import run_lm
-from idtool._fit._result import Z95, Z_AT_BOUND, FitResult, one_sided
+from idtool._fit._result import Z95, Z_AT_BOUND, FitResult, one_sided, uninformed
 
 __all__ = [
     "Profile",
@@ -32,6 +35,9 @@ __all__ = [
 
 _CHI2_95 = 3.84  # -2 log L rise at the ends of a 95% interval, one parameter
 _TOO_FLAT = 1.0  # a rise below this at an end means the interval is far too narrow
+# ... and above this, far too wide: on a quadratic profile the end is then at least
+# twice as far as the profile's (the mirror of _TOO_FLAT's half)
+_TOO_STEEP = _CHI2_95**2
 # halvings of the last step of a profile walk: the end to 1/64 of that step
 _BISECTIONS = 6
 # A refit stops once its Gauss-Newton decrement is below this many residual variances,
@@ -109,7 +115,7 @@ def _profile_end(
 
 def check_intervals(result: FitResult) -> FitResult:
     """``result`` with each physical parameter's 95% interval checked against the
-    likelihood (module docstring); widened to the profile interval where too narrow."""
+    likelihood (module docstring); replaced by the profile interval where far off."""
     model = result.model
     estimates = dict(result.estimates)
     warnings = list(result.warnings)
@@ -123,35 +129,53 @@ def check_intervals(result: FitResult) -> FitResult:
         if est.at_bound:
             estimates[name] = _from_the_bound(result, i, est)
             continue
-        ends, z_ends = [], []
-        for side, value in ((-1.0, est.ci95[0]), (1.0, est.ci95[1])):
-            zi = float(result.z[i]) + side * Z95 * se
-            rise = refit_with_fixed(result, i, zi)[0] if abs(zi) < Z_AT_BOUND else _CHI2_95
-            if rise < _TOO_FLAT:
-                zi = _profile_end(result, i, side, se)
-                value = float(spec.value(float(zi)))
-            ends.append((value, rise))
-            z_ends.append(zi)
-        if all(rise >= _TOO_FLAT for _, rise in ends):
+        # the rise of -2 log L at each Gauss-Newton end, the others refitted (None: that
+        # end is the range's bound)
+        z_wald = [float(result.z[i]) + side * Z95 * se for side in (-1.0, 1.0)]
+        rises = [
+            refit_with_fixed(result, i, zi)[0] if abs(zi) < Z_AT_BOUND else None for zi in z_wald
+        ]
+        off = [r is not None and not _TOO_FLAT <= r <= _TOO_STEEP for r in rises]
+        if not any(off):
             continue
-        (lo, rise_lo), (hi, rise_hi) = ends
+        # the profile's end replaces each end that is far off, and an end at the bound
+        # (is the profile flat up to it?); an end whose rise is near 3.84 stays. A load
+        # scale bounded from below only: its Gauss-Newton lower end, 1.05 N, rose 1.8e7
+        # and its upper end ran off the range; the profile's lower end is 4,150 N
+        z_ends = [
+            _profile_end(result, i, side, se) if bad or r is None else zi
+            for side, bad, r, zi in zip((-1.0, 1.0), off, rises, z_wald, strict=True)
+        ]
+        lo, hi = (float(spec.value(z)) for z in z_ends)
         # a profile that reaches the parameter's bound leaves that side open
-        open_side = one_sided(z_ends[0], z_ends[1])
-        estimates[name] = dataclasses.replace(est, ci95=(lo, hi), one_sided=open_side)
+        estimates[name] = dataclasses.replace(
+            est, ci95=(lo, hi), one_sided=one_sided(z_ends[0], z_ends[1])
+        )
+        said = " and ".join("(the bound)" if r is None else f"{r:.3g}" for r in rises)
+        warnings = [w for w in warnings if not _uninformed_about(w, name)]
         warnings.append(
             Diagnostic(
                 "profile_interval",
                 f"{name}: the Gauss-Newton 95% interval [{est.ci95[0]:.4g}, "
-                f"{est.ci95[1]:.4g}] {spec.unit} is too narrow: refitting the others there, "
-                f"-2 log L rises only {rise_lo:.2f} and {rise_hi:.2f} (3.84 expected); the "
-                f"profile-likelihood interval [{lo:.4g}, {hi:.4g}] is reported instead. The "
-                "data barely inform it",
+                f"{est.ci95[1]:.4g}] {spec.unit} does not follow the likelihood: refitting "
+                f"the others at its ends, -2 log L rises {said} (3.84 expected); the "
+                f"profile-likelihood interval [{lo:.4g}, {hi:.4g}] is reported instead",
                 parameter=name,
                 wald_ci95=est.ci95,
                 profile_ci95=(lo, hi),
             )
         )
+        if (weak := uninformed(spec, lo, hi)) is not None:
+            warnings.append(weak)
     return dataclasses.replace(result, estimates=estimates, warnings=warnings)
+
+
+def _uninformed_about(warning: str, name: str) -> bool:
+    """True for the fit's "uninformed" warning about ``name`` (from its Gauss-Newton
+    interval: the profile's replaces it)."""
+    code = getattr(warning, "code", None)
+    values = getattr(warning, "values", {})
+    return code == "uninformed" and values.get("parameter") == name
 
 
 def _from_the_bound(result: FitResult, i: int, est):

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from idtool._diagnostic import Diagnostic
 from idtool._fit._cov import Covariance
 from idtool._fit._level_design import discrepancy_conditioning
 from idtool._fit._variability import Variability
@@ -26,6 +27,7 @@ __all__ = [
     "estimate_of",
     "interval_statement",
     "one_sided",
+    "uninformed",
     "weakly_identified",
 ]
 
@@ -45,6 +47,20 @@ def weakly_identified(lo: float, hi: float, side: str) -> bool:
     """True when a 95% interval bounded by the data on both sides (``side`` is "") of a
     positive parameter spans more than :data:`WEAK_DECADES` decades."""
     return side == "" and lo > 0.0 and hi > lo and math.log10(hi / lo) > WEAK_DECADES
+
+
+def uninformed(spec: Param, lo: float, hi: float) -> Diagnostic | None:
+    """The "uninformed" warning for a physical log-scale parameter whose 95% interval
+    ``[lo, hi]`` spans more than :data:`WEAK_DECADES` decades, else None."""
+    if not (spec.physical and spec.kind == "log" and hi / max(lo, 1e-300) > 10**WEAK_DECADES):
+        return None
+    return Diagnostic(
+        "uninformed",
+        f"{spec.name}: its 95% interval spans more than a factor of 100 "
+        f"({lo:.3g} to {hi:.3g} {spec.unit}); the data cannot inform it",
+        parameter=spec.name,
+        ci95=(lo, hi),
+    )
 
 
 def interval_statement(
