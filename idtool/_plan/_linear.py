@@ -35,8 +35,10 @@ the target's), which pulls elsewhere inform only through ``rho``.
 
 A new pull's level noise ``E_c`` (an approximation, said so in the plan): the per-trace
 (2, 2) blocks of ``V`` of the measured traces with the planned ON time (else all
-measured), each scaled by ``(N_i / N_c)^2`` (the load cell's noise is absolute, the levels
-grow with the load), their element-wise median; the shared bench parameters' low-rank
+measured), each moved to the candidate by the ratios of the levels (the load cell's noise
+is absolute: in (log OFF, log ON) the block scales by ``OFF_i / OFF_c`` and
+``ON_i / ON_c``, the model's levels at the candidate), their element-wise median; the
+shared bench parameters' low-rank
 part of ``V`` is left out for the new pull (it is the existing traces'); plus the
 scatter. The sds are uncertain: every quantity is computed for ``S`` draws of the sds
 from the fit's grids (REML likelihood times the spike-and-slab prior, as predictions
@@ -233,8 +235,11 @@ def _sd_draws(law: LawFit, n: int, seed: int) -> np.ndarray:
     return out
 
 
-def _reference_noise(law: LawFit, on_time_s: float | None, cand_load_n: np.ndarray) -> np.ndarray:
-    """A new pull's level noise (c, 2, 2) (module docstring)."""
+def _reference_noise(
+    law: LawFit, on_time_s: float | None, cand_off_n: np.ndarray, cand_on_n: np.ndarray
+) -> np.ndarray:
+    """A new pull's level noise (c, 2, 2) in (log OFF, log FR) (module docstring), at
+    candidates whose model OFF and ON levels are ``cand_off_n`` and ``cand_on_n`` [N]."""
     assert law.levels is not None
     free = law.levels[0]
     data = law.model.data
@@ -252,9 +257,20 @@ def _reference_noise(law: LawFit, on_time_s: float | None, cand_load_n: np.ndarr
         same = np.abs(length - on_time_s) < 0.05 * on_time_s
         if same.any():
             meas, blocks = meas[same], blocks[same]
-    load = np.asarray(data.normal_load_n)[meas]
-    scaled = blocks[None] * (load[None, :, None, None] / cand_load_n[:, None, None, None]) ** 2
-    return np.median(scaled, axis=1)
+    # the load cell's noise is absolute [N]: a level's log has sd (noise / level), so a
+    # block moves to a candidate as (log OFF, log ON) scaled by the levels' ratios,
+    # S = T diag(off_i / off_c, on_i / on_c) T^-1 with T: (log OFF, log ON) -> (log OFF,
+    # log FR). By the load alone the ON ratio was missed: the FR falls with the
+    # amplitude and the load, and on the coupling bench the planned pull's log FR sd came
+    # out 0.0069 where the measured traces at its point had 0.0046
+    r = np.asarray(free.off_n)[meas][None, :] / np.asarray(cand_off_n)[:, None]  # (c, i)
+    q = np.asarray(free.on_n)[meas][None, :] / np.asarray(cand_on_n)[:, None]
+    scale = np.zeros((*r.shape, 2, 2))
+    scale[..., 0, 0] = r
+    scale[..., 1, 0] = q - r
+    scale[..., 1, 1] = q
+    moved = np.einsum("ciab,ibd,cied->ciae", scale, blocks, scale)
+    return np.median(moved, axis=1)
 
 
 def linear_law(
@@ -334,7 +350,8 @@ def linear_law(
     # inversion on two busy cores (9 ms against 0.3 ms at dimension 110)
     sigma = np.linalg.inv(info)
     sigma = 0.5 * (sigma + sigma.transpose(0, 2, 1))
-    noise = _reference_noise(law, on_time_s, np.asarray(candidates.normal_load_n, float))
+    off_c = np.exp(g[0, m : m + nc])
+    noise = _reference_noise(law, on_time_s, off_c, off_c * np.exp(g[1, m : m + nc]))
     return LinearLaw(
         name=name,
         weight=weight,

@@ -352,7 +352,8 @@ def plan_pulls(
         "linearised levels model (universal kriging) about the fit's estimate; the sds "
         f"drawn {n_sd} times from the fit's grids",
         f"a new pull's level noise: the measured traces' median (2, 2) block (ON {on_s:g} s), "
-        "scaled by (load ratio)^2; the shared bench parameters' part left out",
+        "moved to the pull by the ratios of its OFF and ON levels (the load cell's noise is "
+        "absolute); the shared bench parameters' part left out",
     )
     return Plan(
         goal=goal,
